@@ -1,0 +1,127 @@
+#include "solvers/core/values.h"
+
+#include <stdexcept>
+
+namespace loopd {
+
+int varDim(VarType t) {
+  switch (t) {
+    case VarType::SE2: return 3;
+    case VarType::SE3: return 6;
+    case VarType::Point2: return 2;
+    case VarType::Point3: return 3;
+    case VarType::Scalar: return 1;
+  }
+  return 0;
+}
+
+const char* varTypeName(VarType t) {
+  switch (t) {
+    case VarType::SE2: return "SE2";
+    case VarType::SE3: return "SE3";
+    case VarType::Point2: return "Point2";
+    case VarType::Point3: return "Point3";
+    case VarType::Scalar: return "Scalar";
+  }
+  return "?";
+}
+
+int Values::slot(Key k) const {
+  auto it = slots_.find(k);
+  return it == slots_.end() ? -1 : it->second;
+}
+
+int Values::insertRaw(Key k, VarType t) {
+  const int s = size();
+  if (!slots_.emplace(k, s).second)
+    throw std::invalid_argument("variable " + keyToString(k) + " already exists");
+  keys_.push_back(k);
+  types_.push_back(t);
+  data_.resize(data_.size() + kValueStride, 0.0);
+  return s;
+}
+
+int Values::insert(Key k, const SE2& x) {
+  const int s = insertRaw(k, VarType::SE2);
+  set(s, x);
+  return s;
+}
+int Values::insert(Key k, const SE3& x) {
+  const int s = insertRaw(k, VarType::SE3);
+  set(s, x);
+  return s;
+}
+int Values::insertPoint2(Key k, const Vec2& p) {
+  const int s = insertRaw(k, VarType::Point2);
+  setPoint2(s, p);
+  return s;
+}
+int Values::insertPoint3(Key k, const Vec3& p) {
+  const int s = insertRaw(k, VarType::Point3);
+  setPoint3(s, p);
+  return s;
+}
+int Values::insertScalar(Key k, double v) {
+  const int s = insertRaw(k, VarType::Scalar);
+  setScalar(s, v);
+  return s;
+}
+int Values::insertFrom(const Values& o, int os) {
+  const int s = insertRaw(o.key(os), o.type(os));
+  std::copy(o.data(os), o.data(os) + kValueStride, data(s));
+  return s;
+}
+
+void Values::set(int s, const SE2& x) {
+  double* d = data(s);
+  d[0] = x.x;
+  d[1] = x.y;
+  d[2] = x.theta;
+}
+void Values::set(int s, const SE3& x) {
+  double* d = data(s);
+  Eigen::Map<Mat3> R(d);
+  Eigen::Map<Vec3> t(d + 9);
+  R = x.R;
+  t = x.t;
+}
+void Values::setPoint2(int s, const Vec2& p) { Eigen::Map<Vec2>(data(s)) = p; }
+void Values::setPoint3(int s, const Vec3& p) { Eigen::Map<Vec3>(data(s)) = p; }
+void Values::setScalar(int s, double v) { data(s)[0] = v; }
+
+SE2 Values::se2(int s) const {
+  const double* d = data(s);
+  return {d[0], d[1], d[2]};
+}
+SE3 Values::se3(int s) const {
+  const double* d = data(s);
+  return {Eigen::Map<const Mat3>(d), Eigen::Map<const Vec3>(d + 9)};
+}
+Vec2 Values::point2(int s) const { return Eigen::Map<const Vec2>(data(s)); }
+Vec3 Values::point3(int s) const { return Eigen::Map<const Vec3>(data(s)); }
+
+void Values::retract(int s, const double* delta) {
+  switch (type(s)) {
+    case VarType::SE2:
+      set(s, se2(s).retract(Eigen::Map<const Eigen::Vector3d>(delta)));
+      break;
+    case VarType::SE3: {
+      // Right perturbation; re-orthonormalise through the quaternion so rounding never
+      // accumulates over many steps.
+      SE3 x = se3(s).retract(Eigen::Map<const Vec6>(delta));
+      x.R = Eigen::Quaterniond(x.R).normalized().toRotationMatrix();
+      set(s, x);
+      break;
+    }
+    case VarType::Point2: Eigen::Map<Vec2>(data(s)) += Eigen::Map<const Vec2>(delta); break;
+    case VarType::Point3: Eigen::Map<Vec3>(data(s)) += Eigen::Map<const Vec3>(delta); break;
+    case VarType::Scalar: data(s)[0] += delta[0]; break;
+  }
+}
+
+void Values::retractAll(const std::vector<int>& offsets, const double* delta) {
+  for (int s = 0; s < size(); ++s)
+    if (offsets[s] >= 0) retract(s, delta + offsets[s]);
+}
+
+}  // namespace loopd

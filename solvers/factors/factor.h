@@ -1,0 +1,81 @@
+#pragma once
+// A factor: a whitened residual r(x) ∈ R^dim over up to three variables, with analytic
+// Jacobians written into caller-owned fixed-size buffers (no allocation per evaluation).
+// Whitened means r = U·e with UᵀU = Ω, so chi2 = rᵀr = eᵀΩe (g2o's convention).
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "solvers/core/key.h"
+#include "solvers/core/values.h"
+
+namespace loopd {
+
+using FactorId = std::uint64_t;
+constexpr int kMaxFactorKeys = 3;
+constexpr int kMaxResidualDim = 6;
+
+/// Which factors robust variants may down-weight: loop closures and landmark sightings are
+/// uncertain; priors and odometry are trusted.
+enum class FactorRole : std::uint8_t { Prior, Odometry, LoopClosure, Landmark };
+
+const char* factorRoleName(FactorRole r);
+inline bool isUncertain(FactorRole r) {
+  return r == FactorRole::LoopClosure || r == FactorRole::Landmark;
+}
+
+/// Jacobian buffer of one key: dim × varDim, column-major with leading dimension dim.
+using JacobianBlock = std::array<double, kMaxResidualDim * kMaxVarDim>;
+
+class Factor {
+ public:
+  virtual ~Factor() = default;
+
+  int dim() const { return dim_; }
+  int size() const { return numKeys_; }
+  Key key(int i) const { return keys_[i]; }
+  VarType varType(int i) const { return varTypes_[i]; }
+  FactorRole role() const { return role_; }
+
+  /// Caller-chosen id (file edge index, or sender-unique id); not interpreted here.
+  FactorId id() const { return id_; }
+  void setId(FactorId id) { id_ = id; }
+  void setRole(FactorRole r) { role_ = r; }
+
+  /// x[i] → storage of key(i) (see Values). Writes dim() whitened residuals into r and, when
+  /// J is non-null, each non-null J[i] with the dim()×varDim(i) whitened Jacobian.
+  virtual void evaluate(const double* const* x, double* r, double* const* J) const = 0;
+
+  /// Deep copy (robust wrappers and the server keep their own).
+  virtual std::unique_ptr<Factor> clone() const = 0;
+
+  /// Human-readable kind, e.g. "BetweenSE2".
+  virtual const char* typeName() const = 0;
+
+  /// Whitened error at values (all keys must be present).
+  Eigen::VectorXd whitenedError(const Values& values) const;
+  /// rᵀr at values.
+  double chi2(const Values& values) const;
+
+ protected:
+  Factor(std::initializer_list<std::pair<Key, VarType>> vars, int dim, FactorRole role);
+
+ private:
+  std::array<Key, kMaxFactorKeys> keys_{};
+  std::array<VarType, kMaxFactorKeys> varTypes_{};
+  int numKeys_ = 0;
+  int dim_ = 0;
+  FactorRole role_;
+  FactorId id_ = 0;
+};
+
+using FactorPtr = std::shared_ptr<const Factor>;
+
+/// Upper-triangular U with UᵀU = Ω; throws std::invalid_argument if Ω is not symmetric
+/// positive definite or not finite.
+template <int D>
+Eigen::Matrix<double, D, D> sqrtInformation(const Eigen::Matrix<double, D, D>& information);
+
+}  // namespace loopd

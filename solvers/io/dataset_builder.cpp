@@ -1,0 +1,104 @@
+#include "solvers/io/dataset_builder.h"
+
+#include "solvers/io/odometry_init.h"
+
+namespace loopd::io::detail {
+
+namespace {
+
+bool is3dVertex(VertexType t) { return t == VertexType::SE3 || t == VertexType::Point3; }
+bool is3dEdge(EdgeType t) { return t == EdgeType::BetweenSE3 || t == EdgeType::PosePoint3; }
+bool isBetween(EdgeType t) { return t == EdgeType::BetweenSE2 || t == EdgeType::BetweenSE3; }
+
+std::string edgeName(const Edge& e) {
+  return "edge " + std::to_string(e.from) + " -> " + std::to_string(e.to);
+}
+
+}  // namespace
+
+DatasetBuilder::DatasetBuilder(const std::string& path, const char* format,
+                               bool landmarkIdsShared)
+    : landmarkIdsShared_(landmarkIdsShared) {
+  ds_.path = path;
+  ds_.format = format;
+}
+
+void DatasetBuilder::noteDimension(const LineScanner& in, bool is3d) {
+  if (dimensionLine_ == 0) {
+    dimensionLine_ = in.line();
+    ds_.is3d = is3d;
+  } else if (is3d != ds_.is3d) {
+    in.fail(std::string(in.tag()) + " is " + (is3d ? "3D" : "2D") + " but line " +
+            std::to_string(dimensionLine_) + " made this a " + (ds_.is3d ? "3D" : "2D") +
+            " file");
+  }
+}
+
+void DatasetBuilder::addVertex(const LineScanner& in, const Vertex& v) {
+  noteDimension(in, is3dVertex(v.type));
+  auto& ids = v.isLandmark() && !landmarkIdsShared_ ? landmarkIds_ : poseIds_;
+  const auto [it, inserted] = ids.emplace(v.id, Seen{v.isLandmark(), v.line});
+  if (!inserted) {
+    in.fail("vertex " + std::to_string(v.id) + " is already defined on line " +
+            std::to_string(it->second.line));
+  }
+  (v.isLandmark() ? ds_.landmarks : ds_.poses).push_back(v);
+  ds_.hadVertices = true;
+}
+
+void DatasetBuilder::addEdge(const LineScanner& in, Edge e) {
+  noteDimension(in, is3dEdge(e.type));
+  // Pose and landmark ids are distinct variables only when they live in separate spaces.
+  if (e.from == e.to && (isBetween(e.type) || landmarkIdsShared_)) {
+    in.fail(std::string(in.tag()) + " connects vertex " + std::to_string(e.from) +
+            " to itself");
+  }
+  e.index = static_cast<int>(ds_.edges.size());
+  ds_.edges.push_back(e);
+}
+
+void DatasetBuilder::addEquivalence(const LineScanner& in, std::int64_t a, std::int64_t b) {
+  if (a == b) in.fail(std::string(in.tag()) + " joins vertex " + std::to_string(a) + " to itself");
+  ds_.equivalences.emplace_back(a, b);
+  equivalenceLines_.push_back(in.line());
+}
+
+void DatasetBuilder::requireVertex(int line, std::int64_t id, bool landmark) const {
+  const auto& ids = landmark && !landmarkIdsShared_ ? landmarkIds_ : poseIds_;
+  const auto it = ids.find(id);
+  const char* kind = landmark ? "landmark" : "pose";
+  if (it == ids.end()) {
+    throw DatasetError(ds_.path, line,
+                       std::string(kind) + " " + std::to_string(id) +
+                           " is not defined by any vertex line in this file");
+  }
+  if (it->second.landmark != landmark) {
+    throw DatasetError(ds_.path, line,
+                       "vertex " + std::to_string(id) + " (line " +
+                           std::to_string(it->second.line) + ") is a " +
+                           (landmark ? "pose" : "landmark") + ", but is used as a " + kind);
+  }
+}
+
+Dataset DatasetBuilder::finish() {
+  if (ds_.edges.empty()) throw DatasetError(ds_.path, 0, "the file has no edges");
+  if (ds_.hadVertices) {
+    for (const Edge& e : ds_.edges) {
+      try {
+        requireVertex(e.line, e.from, false);
+        requireVertex(e.line, e.to, !isBetween(e.type));
+      } catch (const DatasetError& err) {
+        throw DatasetError(ds_.path, e.line, edgeName(e) + ": " + err.reason());
+      }
+    }
+    for (std::size_t i = 0; i < ds_.equivalences.size(); ++i) {
+      requireVertex(equivalenceLines_[i], ds_.equivalences[i].first, false);
+      requireVertex(equivalenceLines_[i], ds_.equivalences[i].second, false);
+    }
+  } else {
+    initialiseFromOdometry(ds_, landmarkIdsShared_);
+  }
+  return std::move(ds_);
+}
+
+}  // namespace loopd::io::detail

@@ -1,0 +1,36 @@
+#pragma once
+// A dataset turned into what the solvers take: the factor graph (one factor per file edge, in
+// file order), the initial values, and the mapping back to file ids for writing estimates.
+#include <cstdint>
+#include <vector>
+
+#include "solvers/graph/factor_graph.h"
+#include "solvers/io/dataset.h"
+
+namespace loopd {
+
+struct PoseGraphProblem {
+  FactorGraph graph;          // factor i is the file's edge i (id() = i)
+  Values initial;             // poses first (file order), then landmarks
+  bool is3d = false;
+  Key firstPose = 0;          // the gauge: lowest pose id
+
+  int poseCount() const { return poses; }
+  int landmarkCount() const { return landmarks; }
+  int poses = 0;
+  int landmarks = 0;
+};
+
+/// Builds factors and initial values. Between edges whose ends are consecutive ids are
+/// odometry, others loop closures; pose–landmark edges are landmark sightings. EQUIV pairs
+/// become tight between constraints (identity, information 1e6). Throws std::invalid_argument
+/// (naming the file line) for an edge the factors reject.
+PoseGraphProblem buildProblem(const io::Dataset& dataset);
+
+/// Copies an estimate back into a dataset's vertices (same ids), for the writers.
+void storeEstimate(const Values& estimate, io::Dataset& dataset);
+
+/// The key a file vertex gets: poses are poseKey(id), landmarks landmarkKey(id).
+Key vertexKey(const io::Vertex& v);
+
+}  // namespace loopd

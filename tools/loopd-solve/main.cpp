@@ -1,0 +1,122 @@
+// loopd-solve: run any Backend variant offline on a dataset file, batch or as a robot would
+// feed it (--incremental), and write the estimate, stats JSON and marginal covariances.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <iostream>
+
+#include "robust/backend_registry.h"
+#include "solvers/io/dataset_reader.h"
+#include "solvers/io/estimate_writer.h"
+#include "solvers/problem/pose_graph_problem.h"
+#include "tools/common/json_writer.h"
+#include "tools/common/process_stats.h"
+#include "tools/loopd-solve/covariance_writer.h"
+#include "tools/loopd-solve/online_run.h"
+#include "tools/loopd-solve/solve_options.h"
+
+using namespace loopd;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+double since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+int run(const tools::SolveOptions& opt) {
+  const auto tParse = Clock::now();
+  io::Dataset dataset = io::readDataset(opt.input);
+  PoseGraphProblem problem = buildProblem(dataset);
+  const double parseSeconds = since(tParse);
+  const double initialChi2 = problem.graph.chi2(problem.initial);
+  if (!opt.quiet)
+    std::fprintf(stderr, "%s: %d poses, %d landmarks, %d factors, initial chi2 %.6f (%.3f s)\n",
+                 opt.input.c_str(), problem.poses, problem.landmarks, problem.graph.size(),
+                 initialChi2, parseSeconds);
+
+  BackendOptions bo;
+  bo.maxIterations = opt.maxIterations;
+  bo.linearInitialization = opt.linearInit;
+  if (!opt.quiet && !opt.incremental)
+    bo.progress = [](const IterationReport& r) {
+      std::fprintf(stderr, "  iter %3d  chi2 %.9g  %s %.3g  %s  %.2f ms\n", r.iteration, r.chi2,
+                   "trust", r.trustParameter, r.accepted ? "accepted" : "rejected",
+                   r.seconds * 1e3);
+    };
+  std::unique_ptr<Backend> backend = makeBackend(opt.solver, bo);
+
+  tools::JsonObject stats;
+  const auto tSolve = Clock::now();
+  tools::OnlineRunStats online;
+  if (opt.incremental) {
+    online = tools::runOnline(*backend, problem, opt.quiet);
+  } else {
+    BackendUpdate all;
+    all.factors = problem.graph.factors();
+    all.initial = problem.initial;
+    backend->update(all);
+  }
+  const double solveSeconds = since(tSolve);
+  const SolveSummary summary = backend->summary();
+  const double finalChi2 = backend->chi2();
+  if (!opt.quiet)
+    std::fprintf(stderr, "%s: final chi2 %.9g after %d iterations (%s), solve %.3f s\n",
+                 backend->name().c_str(), finalChi2, summary.iterations,
+                 summary.stopReason.c_str(), solveSeconds);
+
+  if (!opt.out.empty()) {
+    storeEstimate(backend->estimate(), dataset);
+    io::writeG2oVertices(opt.out, dataset);
+  }
+  if (!opt.covariances.empty()) {
+    const auto tCov = Clock::now();
+    tools::writeCovariances(opt.covariances, *backend, dataset);
+    if (!opt.quiet) std::fprintf(stderr, "covariances written in %.3f s\n", since(tCov));
+  }
+  if (!opt.stats.empty()) {
+    std::vector<std::int64_t> rejected;
+    for (FactorId id : backend->rejected()) rejected.push_back(static_cast<std::int64_t>(id));
+    std::sort(rejected.begin(), rejected.end());
+    stats.add("solver", backend->name())
+        .add("input", opt.input)
+        .add("poses", problem.poses)
+        .add("landmarks", problem.landmarks)
+        .add("factors", problem.graph.size())
+        .add("initial_chi2", initialChi2)
+        .add("final_chi2", finalChi2)
+        .add("iterations", summary.iterations)
+        .add("parse_s", parseSeconds)
+        .add("solve_s", solveSeconds)
+        .add("converged", summary.converged)
+        .add("stop_reason", summary.stopReason)
+        .add("incremental", opt.incremental);
+    if (opt.incremental) {
+      stats.add("updates", online.updates)
+          .add("update_ms_mean", online.meanMs)
+          .add("update_ms_p99", online.p99Ms)
+          .add("update_ms_max", online.maxMs);
+    }
+    stats.add("rejected", rejected).add("peak_rss_mb", tools::peakRssMb());
+    stats.writeFile(opt.stats);
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  tools::SolveOptions opt;
+  try {
+    opt = tools::parseSolveOptions(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "loopd-solve: %s\n\n%s", e.what(), tools::solveUsage().c_str());
+    return 2;
+  }
+  try {
+    return run(opt);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "loopd-solve: %s\n", e.what());
+    return 1;
+  }
+}
