@@ -3,6 +3,7 @@
 #include <chrono>
 #include <stdexcept>
 
+#include "solvers/backend/update_validation.h"
 #include "solvers/init/initialization.h"
 #include "solvers/marginals/batch_marginals.h"
 
@@ -13,33 +14,7 @@ BatchBackend::BatchBackend(BackendOptions options) : options_(std::move(options)
 std::string BatchBackend::name() const { return optimizerMethodName(options_.method); }
 
 void BatchBackend::validate(const BackendUpdate& u) const {
-  std::unordered_map<FactorId, int> removing;
-  for (FactorId id : u.removals) {
-    if (!factorIndex_.count(id))
-      throw std::invalid_argument("removal of unknown factor id " + std::to_string(id));
-    if (!removing.emplace(id, 0).second)
-      throw std::invalid_argument("factor id " + std::to_string(id) + " removed twice");
-  }
-  for (Key k : u.initial.keys())
-    if (estimate_.contains(k))
-      throw std::invalid_argument("initial value for existing variable " + keyToString(k));
-  std::unordered_map<FactorId, int> adding;
-  for (const auto& f : u.factors) {
-    if ((factorIndex_.count(f->id()) && !removing.count(f->id())) ||
-        !adding.emplace(f->id(), 0).second)
-      throw std::invalid_argument("duplicate factor id " + std::to_string(f->id()));
-    for (int k = 0; k < f->size(); ++k) {
-      const Key key = f->key(k);
-      const Values& where = estimate_.contains(key) ? estimate_ : u.initial;
-      const int s = where.slot(key);
-      if (s < 0)
-        throw std::invalid_argument("factor " + std::to_string(f->id()) + " refers to " +
-                                    keyToString(key) + " which has no value");
-      if (where.type(s) != f->varType(k))
-        throw std::invalid_argument("factor " + std::to_string(f->id()) + " expects " +
-                                    varTypeName(f->varType(k)) + " for " + keyToString(key));
-    }
-  }
+  validateUpdate(u, estimate_, factorIndex_, u.initial);
 }
 
 UpdateResult BatchBackend::update(const BackendUpdate& u) {

@@ -71,14 +71,14 @@ HessianLayout::HessianLayout(const FactorGraph& graph, const Values& values,
   std::vector<int> position(n);
   for (int p = 0; p < n; ++p) position[order[p]] = p;
   slotOffset_.assign(numSlots, -1);
-  std::vector<int> offsetByPosition(n);
   dimension_ = 0;
   for (int p = 0; p < n; ++p) {
     const int s = activeSlot[order[p]];
     slotOffset_[s] = dimension_;
-    offsetByPosition[p] = dimension_;
+    blockOffsets_.push_back(dimension_);
     dimension_ += varDim(values.type(s));
   }
+  blockOffsets_.push_back(dimension_);
 
   // Column pattern of each variable: its earlier neighbours, then itself (whole block).
   columnLength_.assign(numSlots, 0);

@@ -21,6 +21,9 @@ class HessianLayout {
   const std::vector<int>& rowIndex() const { return rowIndex_; }
   /// Scalar offset of each Values slot, −1 for fixed variables.
   const std::vector<int>& slotOffset() const { return slotOffset_; }
+  /// Scalar offsets of the active variables in elimination order, plus dimension() at the
+  /// end: variable b occupies [blockOffsets[b], blockOffsets[b+1]).
+  const std::vector<int>& blockOffsets() const { return blockOffsets_; }
   /// Values slot of each factor key (factor-major, kMaxFactorKeys each).
   int factorSlot(int factor, int k) const { return factorSlots_[factor * kMaxFactorKeys + k]; }
   /// Position in the CSC value array of entry (0, 0) of block (key a, key b) of factor f,
@@ -44,6 +47,7 @@ class HessianLayout {
   std::vector<int> blockStart_;
   std::vector<int> diagonal_;
   std::vector<int> columnLength_;
+  std::vector<int> blockOffsets_;
 };
 
 }  // namespace loopd

@@ -864,29 +864,34 @@ TEST(Python, DecodesAndReencodesEverySampleIdentically) {
 // ---------------------------------------------------------------------------------------
 // A real publish/subscribe through LCM's in-process provider.
 
-struct Receiver {
+// Handlers are plain functions (subscribeFunction): LCM 1.3.1's member-function subscribe
+// trips a GCC UBSan vptr false positive inside lcm-cpp-impl.hpp under LOOPD_SANITIZE.
+struct Received {
   std::vector<loopd::factor_batch_t> batches;
   std::vector<loopd::estimate_t> estimates;
   std::vector<std::pair<std::string, Bytes>> raw;
-  void on_batch(const lcm::ReceiveBuffer*, const std::string&, const loopd::factor_batch_t* msg) {
-    batches.push_back(*msg);
-  }
-  void on_estimate(const lcm::ReceiveBuffer*, const std::string&, const loopd::estimate_t* msg) {
-    estimates.push_back(*msg);
-  }
-  void on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
-    const auto* p = static_cast<const uint8_t*>(rbuf->data);
-    raw.emplace_back(channel, Bytes(p, p + rbuf->data_size));
-  }
 };
+
+void on_batch(const lcm::ReceiveBuffer*, const std::string&, const loopd::factor_batch_t* msg,
+              Received* rx) {
+  rx->batches.push_back(*msg);
+}
+void on_estimate(const lcm::ReceiveBuffer*, const std::string&, const loopd::estimate_t* msg,
+                 Received* rx) {
+  rx->estimates.push_back(*msg);
+}
+void on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel, Received* rx) {
+  const auto* p = static_cast<const uint8_t*>(rbuf->data);
+  rx->raw.emplace_back(channel, Bytes(p, p + rbuf->data_size));
+}
 
 TEST(Lcm, PublishSubscribeOverMemq) {
   lcm::LCM lc("memq://");
   ASSERT_TRUE(lc.good());
-  Receiver rx;
-  lcm::Subscription* s1 = lc.subscribe("LOOPD_FACTORS", &Receiver::on_batch, &rx);
-  lcm::Subscription* s2 = lc.subscribe("LOOPD_ESTIMATE", &Receiver::on_estimate, &rx);
-  lcm::Subscription* s3 = lc.subscribe("LOOPD_.*", &Receiver::on_raw, &rx);
+  Received rx;
+  lcm::Subscription* s1 = lc.subscribeFunction("LOOPD_FACTORS", &on_batch, &rx);
+  lcm::Subscription* s2 = lc.subscribeFunction("LOOPD_ESTIMATE", &on_estimate, &rx);
+  lcm::Subscription* s3 = lc.subscribeFunction("LOOPD_.*", &on_raw, &rx);
   ASSERT_NE(s1, nullptr);
   ASSERT_NE(s2, nullptr);
   ASSERT_NE(s3, nullptr);

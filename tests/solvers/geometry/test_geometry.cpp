@@ -2,6 +2,7 @@
 // differences) and conversions.
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <cmath>
 #include <random>
@@ -151,8 +152,8 @@ TEST(SO3, ExpLogNearPi) {
     }
   }
   // Exactly π (about each axis and a generic one): Log is ±ω, Exp(Log R) = R.
-  for (const Vec3& axis : {Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ(),
-                           Vec3(1.0, -2.0, 0.5).normalized()}) {
+  for (const Vec3& axis : std::vector<Vec3>{Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ(),
+                                             Vec3(1.0, -2.0, 0.5).normalized()}) {
     const Mat3 R = Eigen::AngleAxisd(kPi, axis).toRotationMatrix();
     const Vec3 l = logSO3(R);
     EXPECT_NEAR(l.norm(), kPi, 1e-9);

@@ -205,8 +205,12 @@ void expectMatchesDense(const HessianLayout& layout, const NormalEquations& ne,
       const int r = ri[p];
       ASSERT_GE(r, 0);
       ASSERT_LT(r, n);
-      if (p > cs[c]) EXPECT_GT(r, ri[p - 1]) << "rows not strictly increasing in column " << c;
-      if (r > c) EXPECT_EQ(slotOfColumn(layout, values, r), sc) << "lower entry outside the diagonal block";
+      if (p > cs[c]) {
+        EXPECT_GT(r, ri[p - 1]) << "rows not strictly increasing in column " << c;
+      }
+      if (r > c) {
+        EXPECT_EQ(slotOfColumn(layout, values, r), sc) << "lower entry outside the diagonal block";
+      }
       // Every stored entry (also the lower part of diagonal blocks) is the true H entry.
       EXPECT_NEAR(hv[p], dense.H(r, c), 1e-10 * scale) << "H(" << r << "," << c << ")";
       if (r <= c) upper(r, c) = hv[p];
@@ -316,8 +320,9 @@ TEST_P(LinearTest, FixedFirstPoseHasNoColumns) {
   for (int f = 0; f < p.graph.size(); ++f)
     for (int a = 0; a < p.graph[f]->size(); ++a)
       for (int b = 0; b < p.graph[f]->size(); ++b)
-        if (layout.factorSlot(f, a) == s0 || layout.factorSlot(f, b) == s0)
+        if (layout.factorSlot(f, a) == s0 || layout.factorSlot(f, b) == s0) {
           EXPECT_EQ(layout.blockStart(f, a, b), -1);
+        }
   NormalEquations ne(layout);
   ne.build(p.graph, p.values);
   const Dense dense = denseNormalEquations(p.graph, p.values, layout);
@@ -367,8 +372,12 @@ void expectSolveMatchesDense(const HessianLayout& layout, const NormalEquations&
   EXPECT_TRUE(chol.analyzed());
   EXPECT_EQ(chol.dimension(), n);
   ASSERT_TRUE(chol.factorize(ne.hessian()));
-  if (kind == FactorizationKind::Supernodal) EXPECT_TRUE(chol.isSupernodal());
-  if (kind == FactorizationKind::Simplicial) EXPECT_FALSE(chol.isSupernodal());
+  if (kind == FactorizationKind::Supernodal) {
+    EXPECT_TRUE(chol.isSupernodal());
+  }
+  if (kind == FactorizationKind::Simplicial) {
+    EXPECT_FALSE(chol.isSupernodal());
+  }
   EXPECT_GT(chol.factorNonZeros(), 0);
 
   VectorXd x(n);
