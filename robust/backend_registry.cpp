@@ -3,6 +3,7 @@
 #include <stdexcept>
 
 #include "solvers/batch/batch_backend.h"
+#include "solvers/incremental/isam2.h"
 
 namespace loopd {
 
@@ -26,6 +27,8 @@ const std::vector<Entry>& registry() {
        [](const BackendOptions& o) { return batch(OptimizerMethod::GaussNewton, o); }},
       {{"dogleg", "batch Powell's Dogleg", false},
        [](const BackendOptions& o) { return batch(OptimizerMethod::Dogleg, o); }},
+      {{"isam2", "incremental Bayes tree (iSAM2): fluid relinearization, wildfire updates", true},
+       [](const BackendOptions& o) { return std::make_unique<Isam2Backend>(o); }},
   };
   return entries;
 }

@@ -89,6 +89,17 @@ bool NonlinearOptimizer::stepIsNegligible(const Values& values,
   return std::sqrt(stepNorm2) < options_.stepTolerance * std::sqrt(step.size() + 1.0);
 }
 
+bool NonlinearOptimizer::remainingDecreaseNegligible(double cost, std::vector<double>& work,
+                                                     std::vector<double>& solution) {
+  // gᵀH⁻¹g is what the next Gauss–Newton step would gain; the previous factorization is
+  // close enough to H here to tell "nothing left" without paying for a new one.
+  const std::vector<double>& g = current_->gradient();
+  work = g;
+  cholesky_.solve(work.data(), solution.data());
+  const double expected = dot(solution, g);
+  return expected >= 0.0 && expected <= options_.relativeTolerance * cost;
+}
+
 bool NonlinearOptimizer::factorizeAt(const Values& values, const double* weights) {
   current_->build(graph_, values, weights);
   return cholesky_.factorize(current_->hessian());
@@ -179,6 +190,11 @@ OptimizerResult NonlinearOptimizer::runLevenbergMarquardt(Values& values, const 
         result.stopReason = "cost decrease below tolerance";
         break;
       }
+      if (remainingDecreaseNegligible(cost.weighted, rhs, step)) {
+        result.converged = true;
+        result.stopReason = "expected decrease below tolerance";
+        break;
+      }
       if (stepIsNegligible(values, step)) {
         result.converged = true;
         result.stopReason = "step below tolerance";
@@ -236,6 +252,11 @@ OptimizerResult NonlinearOptimizer::runGaussNewton(Values& values, const double*
     if (costConverged(before, cost.weighted, options_) || stepIsNegligible(values, step)) {
       result.converged = true;
       result.stopReason = "cost decrease below tolerance";
+      break;
+    }
+    if (remainingDecreaseNegligible(cost.weighted, rhs, step)) {
+      result.converged = true;
+      result.stopReason = "expected decrease below tolerance";
       break;
     }
   }

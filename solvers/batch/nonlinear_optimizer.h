@@ -34,7 +34,8 @@ struct OptimizerOptions {
   double relativeTolerance = 1e-7;  // stop when an accepted step lowers the cost by less
   double absoluteTolerance = 1e-12;  // or by less than this
   double stepTolerance = 1e-12;      // or moves every variable by less (relative to |x|+tol)
-  double initialLambda = 1e-5;       // LM: damping relative to diag(H)
+  double initialLambda = 1e-10;      // LM: damping relative to diag(H); pose graphs are
+                                     // badly conditioned, so start near Gauss–Newton
   double initialRadius = 1e4;        // Dogleg trust radius
   FactorizationKind factorization = FactorizationKind::Auto;
   std::function<void(const IterationReport&)> progress;  // called after every iteration
@@ -71,6 +72,8 @@ class NonlinearOptimizer {
   OptimizerResult runLevenbergMarquardt(Values& values, const double* weights);
   OptimizerResult runGaussNewton(Values& values, const double* weights);
   OptimizerResult runDogleg(Values& values, const double* weights);
+  bool remainingDecreaseNegligible(double cost, std::vector<double>& work,
+                                   std::vector<double>& solution);
   bool stepIsNegligible(const Values& values, const std::vector<double>& step) const;
   void report(int iteration, const LinearizationCost& cost, double trust, bool accepted,
               double seconds) const;

@@ -1,7 +1,6 @@
 #include "solvers/init/initialization.h"
 
 #include <Eigen/Sparse>
-#include <Eigen/SparseCholesky>
 #include <cmath>
 #include <deque>
 #include <stdexcept>
@@ -9,6 +8,7 @@
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
 #include "solvers/factors/landmark_factors.h"
+#include "solvers/linear/sparse_cholesky.h"
 
 namespace loopd {
 
@@ -65,10 +65,17 @@ struct BlockNormalEquations {
   Eigen::MatrixXd solve() {
     Eigen::SparseMatrix<double> H(u.count, u.count);
     H.setFromTriplets(triplets.begin(), triplets.end());
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(H);
-    if (ldlt.info() != Eigen::Success)
+    const Eigen::SparseMatrix<double> upper = H.triangularView<Eigen::Upper>();
+    std::vector<int> colStart(upper.outerIndexPtr(), upper.outerIndexPtr() + u.count + 1);
+    std::vector<int> rowIndex(upper.innerIndexPtr(), upper.innerIndexPtr() + upper.nonZeros());
+    std::vector<double> values(upper.valuePtr(), upper.valuePtr() + upper.nonZeros());
+    SparseCholesky cholesky;
+    cholesky.analyze(u.count, colStart, rowIndex, /*natural=*/false);
+    if (!cholesky.factorize(values))
       throw std::runtime_error("linear initialisation: singular system");
-    return ldlt.solve(rhs);
+    Eigen::MatrixXd x(u.count, rhs.cols());
+    cholesky.solve(rhs.data(), x.data(), static_cast<int>(rhs.cols()));
+    return x;
   }
 };
 

@@ -68,12 +68,6 @@ struct Geometry<SE3> {
   }
 };
 
-bool consecutive(std::int64_t a, std::int64_t b) {
-  // Unsigned arithmetic: no overflow at the ends of the id range.
-  const auto ua = static_cast<std::uint64_t>(a), ub = static_cast<std::uint64_t>(b);
-  return ua - ub == 1 || ub - ua == 1;
-}
-
 /// Pose ids (sorted) and the first line that mentions each.
 struct PoseIds {
   std::vector<std::int64_t> ids;
@@ -131,8 +125,8 @@ std::vector<Pose> composePoses(const Dataset& ds, const PoseIds& poses) {
     arcs[fill[b]++] = {b, a, k, false};
   }
 
-  // 0-1 breadth-first search: odometry arcs cost 0, others 1, so the tree follows the odometry
-  // chain as far as it goes. A pose is placed when it leaves the queue for the first time, by
+  // 0-1 breadth-first search: odometry arcs (between poses next to each other in id order)
+  // cost 0, others 1, so the tree follows the odometry chain as far as it goes. A pose is placed when it leaves the queue for the first time, by
   // which point the pose it was reached from is placed.
   struct Node {
     int cost = INT_MAX;
@@ -158,7 +152,8 @@ std::vector<Pose> composePoses(const Dataset& ds, const PoseIds& poses) {
       const Arc& a = arcs[k];
       Node& next = nodes[a.to];
       if (next.placed) continue;
-      const int step = consecutive(poses.ids[u], poses.ids[a.to]) ? 0 : 1;
+      // Odometry joins neighbours in id order (Victoria Park skips the ids of landmarks).
+      const int step = a.to == u + 1 || a.to == u - 1 ? 0 : 1;
       if (nodes[u].cost + step >= next.cost) continue;
       next.cost = nodes[u].cost + step;
       next.via = a;

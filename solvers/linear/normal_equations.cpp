@@ -27,7 +27,8 @@ LinearizationCost NormalEquations::build(const FactorGraph& graph, const Values&
   const double* x[kMaxFactorKeys];
   double r[kMaxResidualDim];
   JacobianBlock jac[kMaxFactorKeys];
-  double* J[kMaxFactorKeys] = {jac[0].data(), jac[1].data(), jac[2].data()};
+  double* J[kMaxFactorKeys];
+  for (int k = 0; k < kMaxFactorKeys; ++k) J[k] = jac[k].data();
 
   for (int f = 0; f < graph.size(); ++f) {
     const Factor& factor = *graph[f];

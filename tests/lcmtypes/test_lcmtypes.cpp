@@ -7,6 +7,7 @@
 #include <lcm/lcm-cpp.hpp>
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -19,7 +20,6 @@
 #include <stdexcept>
 #include <string>
 #include <tuple>
-#include <climits>
 #include <vector>
 
 #include <unistd.h>
@@ -102,15 +102,19 @@ std::vector<double> quat(double ax, double ay, double az, double angle) {
 // the covariance with standard deviations `sigmas` and correlation `rho` between neighbouring
 // entries, or (information) its diagonal inverse 1/sigma^2 with a weak, diagonally dominated
 // coupling -rho/(10 sigma_r sigma_c) between neighbours.
-std::vector<double> upper_triangle(const std::vector<double>& sigmas, double rho, bool information) {
+std::vector<double> upper_triangle(const std::vector<double>& sigmas, double rho,
+                                   bool information) {
   const size_t n = sigmas.size();
   std::vector<double> out;
   for (size_t r = 0; r < n; ++r) {
     for (size_t c = r; c < n; ++c) {
       const double s = sigmas[r] * sigmas[c];
-      if (r == c) out.push_back(information ? 1.0 / s : s);
-      else if (c == r + 1) out.push_back(information ? -rho / (10.0 * s) : rho * s);
-      else out.push_back(0.0);
+      if (r == c)
+        out.push_back(information ? 1.0 / s : s);
+      else if (c == r + 1)
+        out.push_back(information ? -rho / (10.0 * s) : rho * s);
+      else
+        out.push_back(0.0);
     }
   }
   EXPECT_EQ(out.size(), n * (n + 1) / 2);
@@ -210,9 +214,10 @@ loopd::factor_batch_t batch_3d() {
   b.ambiguous.push_back(a);
   b.num_ambiguous = n16(b.ambiguous);
 
-  b.initial_values.push_back(initial(pose(1, 1), loopd::initial_value_t::SE3,
-                                     se3(1.0, 0.0, 0.0, quat(0, 0, 1, 0.05))));
-  b.initial_values.push_back(initial(landmark(1, 7), loopd::initial_value_t::POINT3, {4.5, -0.3, 1.2}));
+  b.initial_values.push_back(
+      initial(pose(1, 1), loopd::initial_value_t::SE3, se3(1.0, 0.0, 0.0, quat(0, 0, 1, 0.05))));
+  b.initial_values.push_back(
+      initial(landmark(1, 7), loopd::initial_value_t::POINT3, {4.5, -0.3, 1.2}));
   b.num_initial_values = n16(b.initial_values);
   b.remove_ids = {17, 23};
   b.num_remove_ids = n16(b.remove_ids);
@@ -242,7 +247,8 @@ loopd::factor_batch_t batch_2d() {
                              {landmark(2, 12)}, {6.0, 1.4}, upper_triangle({1.0, 1.0}, 0, false),
                              "", 0.0, loopd::factor_t::NOISE_COVARIANCE));
   b.factors.push_back(factor(7, loopd::factor_t::PRIOR_POINT3, loopd::factor_t::ROLE_PRIOR,
-                             {landmark(2, 99)}, {1.0, 2.0, 3.0}, upper_triangle({1, 1, 1}, 0, true)));
+                             {landmark(2, 99)}, {1.0, 2.0, 3.0},
+                             upper_triangle({1, 1, 1}, 0, true)));
   b.num_factors = n16(b.factors);
   b.ambiguous.push_back(ambiguous_association());
   b.num_ambiguous = n16(b.ambiguous);
@@ -295,7 +301,8 @@ loopd::estimate_t estimate_se3(int n_poses, int n_landmarks) {
 }
 
 // Dense covariance over keys with the given tangent dims: joint (D x D) or diagonal blocks.
-loopd::covariance_t covariance(const std::vector<std::pair<loopd::key_t, int8_t>>& keys, bool joint) {
+loopd::covariance_t covariance(const std::vector<std::pair<loopd::key_t, int8_t>>& keys,
+                               bool joint) {
   loopd::covariance_t c{};
   c.utime = 1700000002000100;
   c.update_seq = 314;
@@ -310,7 +317,9 @@ loopd::covariance_t covariance(const std::vector<std::pair<loopd::key_t, int8_t>
     total += d;
   }
   c.num_keys = n16(c.keys);
-  auto cov = [](int r, int col) { return r == col ? 0.01 * (1 + r) : 0.001 / (1 + std::abs(r - col)); };
+  auto cov = [](int r, int col) {
+    return r == col ? 0.01 * (1 + r) : 0.001 / (1 + std::abs(r - col));
+  };
   if (joint) {
     for (int r = 0; r < total; ++r)
       for (int col = 0; col < total; ++col) c.values.push_back(cov(r, col));
@@ -342,7 +351,8 @@ loopd::hypothesis_choice_t choice(std::string sender, int64_t id, int32_t altern
   return c;
 }
 
-loopd::hypothesis_t hypothesis(int32_t rank, double score, std::vector<loopd::hypothesis_choice_t> choices) {
+loopd::hypothesis_t hypothesis(int32_t rank, double score,
+                               std::vector<loopd::hypothesis_choice_t> choices) {
   loopd::hypothesis_t h{};
   h.rank = rank;
   h.score = score;
@@ -389,7 +399,8 @@ loopd::status_t status() {
   s.decisions_full = false;
   s.decisions_chunk_index = 0;
   s.decisions_chunk_count = 1;
-  s.decisions = {decision("robot1/vio", 1042, true, 0.93), decision("robot1/vio", 1050, false, 0.0)};
+  s.decisions = {decision("robot1/vio", 1042, true, 0.93),
+                 decision("robot1/vio", 1050, false, 0.0)};
   loopd::loop_decision_t amb = decision("robot2", 5001, true, 1.0);
   amb.ambiguous = true;
   amb.alternative = 2;
@@ -412,8 +423,9 @@ loopd::error_t error_msg() {
   e.request_id = 0;
   e.factor_id = 1043;
   e.code = loopd::error_t::NOT_POSITIVE_DEFINITE;
-  e.reason = "factor 1043 (BETWEEN_SE3): information matrix not positive definite "
-             "(smallest eigenvalue -2.5e-03)";
+  e.reason =
+      "factor 1043 (BETWEEN_SE3): information matrix not positive definite "
+      "(smallest eigenvalue -2.5e-03)";
   e.channel = "LOOPD_FACTORS";
   return e;
 }
@@ -421,32 +433,69 @@ loopd::error_t error_msg() {
 // One realistic sample per type, for the typed tests.
 template <class T>
 T sample();
-template <> loopd::key_t sample() { return pose(3, 1234567890123); }
-template <> loopd::factor_t sample() { return se3_loop_closure(); }
-template <> loopd::ambiguous_factor_t sample() { return ambiguous_association(); }
-template <> loopd::initial_value_t sample() {
-  return initial(pose(1, 118), loopd::initial_value_t::SE3, se3(12.5, -3.25, 0.4, quat(1, 2, 3, 0.7)));
+template <>
+loopd::key_t sample() {
+  return pose(3, 1234567890123);
 }
-template <> loopd::factor_batch_t sample() { return batch_3d(); }
-template <> loopd::command_t sample() { return covariance_request(); }
-template <> loopd::estimate_t sample() { return estimate_se3(60, 5); }
-template <> loopd::covariance_t sample() {
+template <>
+loopd::factor_t sample() {
+  return se3_loop_closure();
+}
+template <>
+loopd::ambiguous_factor_t sample() {
+  return ambiguous_association();
+}
+template <>
+loopd::initial_value_t sample() {
+  return initial(pose(1, 118), loopd::initial_value_t::SE3,
+                 se3(12.5, -3.25, 0.4, quat(1, 2, 3, 0.7)));
+}
+template <>
+loopd::factor_batch_t sample() {
+  return batch_3d();
+}
+template <>
+loopd::command_t sample() {
+  return covariance_request();
+}
+template <>
+loopd::estimate_t sample() {
+  return estimate_se3(60, 5);
+}
+template <>
+loopd::covariance_t sample() {
   return covariance({{pose(0, 117), 6}, {pose(1, 3), 6}, {landmark(1, 7), 3}}, true);
 }
-template <> loopd::loop_decision_t sample() { return decision("robot1/vio", 1042, true, 0.93); }
-template <> loopd::hypothesis_choice_t sample() { return choice("robot1/vio", 5, 1); }
-template <> loopd::hypothesis_t sample() {
+template <>
+loopd::loop_decision_t sample() {
+  return decision("robot1/vio", 1042, true, 0.93);
+}
+template <>
+loopd::hypothesis_choice_t sample() {
+  return choice("robot1/vio", 5, 1);
+}
+template <>
+loopd::hypothesis_t sample() {
   return hypothesis(0, 6112.4, {choice("robot1/vio", 5, 0), choice("robot2", 5002, -1)});
 }
-template <> loopd::sender_gap_t sample() { return gap("robot2", 40, 45, 2); }
-template <> loopd::status_t sample() { return status(); }
-template <> loopd::error_t sample() { return error_msg(); }
+template <>
+loopd::sender_gap_t sample() {
+  return gap("robot2", 40, 45, 2);
+}
+template <>
+loopd::status_t sample() {
+  return status();
+}
+template <>
+loopd::error_t sample() {
+  return error_msg();
+}
 
-using AllTypes =
-    ::testing::Types<loopd::key_t, loopd::factor_t, loopd::ambiguous_factor_t, loopd::initial_value_t,
-                     loopd::factor_batch_t, loopd::command_t, loopd::estimate_t, loopd::covariance_t,
-                     loopd::loop_decision_t, loopd::hypothesis_choice_t, loopd::hypothesis_t,
-                     loopd::sender_gap_t, loopd::status_t, loopd::error_t>;
+using AllTypes = ::testing::Types<loopd::key_t, loopd::factor_t, loopd::ambiguous_factor_t,
+                                  loopd::initial_value_t, loopd::factor_batch_t, loopd::command_t,
+                                  loopd::estimate_t, loopd::covariance_t, loopd::loop_decision_t,
+                                  loopd::hypothesis_choice_t, loopd::hypothesis_t,
+                                  loopd::sender_gap_t, loopd::status_t, loopd::error_t>;
 using AllTypesTuple =
     std::tuple<loopd::key_t, loopd::factor_t, loopd::ambiguous_factor_t, loopd::initial_value_t,
                loopd::factor_batch_t, loopd::command_t, loopd::estimate_t, loopd::covariance_t,
@@ -541,9 +590,11 @@ TEST(RoundTrip, EveryFactorTypeWithItsDimensions) {
   for (const auto& batch : {batch_2d(), batch_3d()}) {
     const loopd::factor_batch_t b = decode<loopd::factor_batch_t>(encode(batch));
     std::vector<loopd::factor_t> all = b.factors;
-    for (const auto& a : b.ambiguous) all.insert(all.end(), a.alternatives.begin(), a.alternatives.end());
+    for (const auto& a : b.ambiguous)
+      all.insert(all.end(), a.alternatives.begin(), a.alternatives.end());
     for (const auto& f : all) {
-      const auto row = std::find_if(table.begin(), table.end(), [&](const Row& r) { return r.type == f.type; });
+      const auto row =
+          std::find_if(table.begin(), table.end(), [&](const Row& r) { return r.type == f.type; });
       ASSERT_NE(row, table.end()) << int{f.type};
       EXPECT_EQ(f.num_keys, row->keys);
       EXPECT_EQ(f.num_measurement, row->measurement);
@@ -709,10 +760,10 @@ TEST(Limits, WorstCaseStatus) {
   s.num_sender_gaps = n16(s.sender_gaps);
   s.decisions.assign(loopd::status_t::MAX_DECISIONS, decision(sender, 1, true, 0.5));
   s.num_decisions = n16(s.decisions);
-  s.hypotheses.assign(
-      loopd::status_t::MAX_HYPOTHESES,
-      hypothesis(0, 1.0, std::vector<loopd::hypothesis_choice_t>(loopd::hypothesis_t::MAX_CHOICES,
-                                                                choice(sender, 1, 0))));
+  s.hypotheses.assign(loopd::status_t::MAX_HYPOTHESES,
+                      hypothesis(0, 1.0,
+                                 std::vector<loopd::hypothesis_choice_t>(
+                                     loopd::hypothesis_t::MAX_CHOICES, choice(sender, 1, 0))));
   s.num_hypotheses = n16(s.hypotheses);
   expect_fits(s.getEncodedSize(), "status_t");
 }
@@ -798,12 +849,15 @@ TYPED_TEST(EveryType, RandomMutationsFailCleanly) {
   for (int trial = 0; trial < 5000; ++trial) {
     Bytes b = good;
     for (int k = flips(rng); k > 0; --k) b[pos(rng)] = static_cast<uint8_t>(byte(rng));
-    if (trial % 4 == 1 && b.size() > 12) put_be(b, std::min(pos(rng), b.size() - 4), nasty[special(rng)], 4);
+    if (trial % 4 == 1 && b.size() > 12)
+      put_be(b, std::min(pos(rng), b.size() - 4), nasty[special(rng)], 4);
     if (trial % 3 == 0) b.resize(pos(rng));
     bool t = false;
     const int rc = try_decode<TypeParam>(b, &t);
-    if (t) ++threw;
-    else if (rc < 0) ++failed;
+    if (t)
+      ++threw;
+    else if (rc < 0)
+      ++failed;
     else {
       ++decoded;
       EXPECT_LE(rc, static_cast<int>(b.size()));
@@ -822,7 +876,8 @@ void write_samples(const std::filesystem::path& dir, std::tuple<T...>*) {
     using M = decltype(tag);
     const Bytes bytes = encode(sample<M>());
     std::ofstream out(dir / (std::string(M::getTypeName()) + ".bin"), std::ios::binary);
-    out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+    out.write(reinterpret_cast<const char*>(bytes.data()),
+              static_cast<std::streamsize>(bytes.size()));
   };
   (write(T{}), ...);
 }
@@ -830,8 +885,8 @@ void write_samples(const std::filesystem::path& dir, std::tuple<T...>*) {
 TEST(Python, DecodesAndReencodesEverySampleIdentically) {
   const std::string python = LOOPD_PYTHON3;
   if (python.empty()) GTEST_SKIP() << "python3 not found";
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
-                                    ("loopd_lcmtypes_py_" + std::to_string(::getpid()));
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("loopd_lcmtypes_py_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   write_samples(dir, static_cast<AllTypesTuple*>(nullptr));
@@ -916,7 +971,8 @@ TEST(Lcm, PublishSubscribeOverMemq) {
   // The raw subscriber sees the misdirected batch and can name it by its fingerprint.
   EXPECT_EQ(rx.raw[2].first, "LOOPD_ESTIMATE");
   loopd::factor_batch_t misdirected{};
-  EXPECT_GT(misdirected.decode(rx.raw[2].second.data(), 0, static_cast<int>(rx.raw[2].second.size())), 0);
+  EXPECT_GT(
+      misdirected.decode(rx.raw[2].second.data(), 0, static_cast<int>(rx.raw[2].second.size())), 0);
 
   lc.unsubscribe(s1);
   lc.unsubscribe(s2);

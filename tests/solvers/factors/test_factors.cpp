@@ -1,6 +1,7 @@
 // Every factor type: analytic whitened Jacobians against central differences taken through
 // Values::retract, zero residual at the measurement, chi2 against an independently built
 // error, information-matrix validation, clone().
+#include <gtest/gtest-spi.h>
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
@@ -331,6 +332,39 @@ TEST(FactorJacobians, EveryTypeCovered) {
   EXPECT_EQ(names, (std::set<std::string>{"BetweenSE2", "BetweenSE3", "PriorSE2", "PriorSE3",
                                            "PriorPoint2", "PriorPoint3", "PosePoint2",
                                            "PosePoint3", "BearingRange2"}));
+}
+
+// The checker itself: a Jacobian off by 1e-4 in one entry must be caught.
+class CorruptedFactor final : public Factor {
+ public:
+  CorruptedFactor(std::shared_ptr<Factor> inner, int key, int entry)
+      : Factor({{inner->key(0), inner->varType(0)}, {inner->key(1), inner->varType(1)}},
+               inner->dim(), inner->role()),
+        inner_(std::move(inner)), key_(key), entry_(entry) {}
+  void evaluate(const double* const* x, double* r, double* const* J) const override {
+    inner_->evaluate(x, r, J);
+    if (J != nullptr && J[key_] != nullptr) J[key_][entry_] += 1e-4;
+  }
+  std::unique_ptr<Factor> clone() const override {
+    return std::make_unique<CorruptedFactor>(*this);
+  }
+  const char* typeName() const override { return "Corrupted"; }
+
+ private:
+  std::shared_ptr<Factor> inner_;
+  int key_, entry_;
+};
+
+TEST(FactorJacobians, CheckerDetectsWrongJacobian) {
+  for (const Case& c : betweenSE3Cases()) {
+    for (int key : {0, 1}) {
+      const CorruptedFactor bad(c.factor, key, 5 * 6 + 2);  // column 5 (rotation z), row 2
+      EXPECT_NONFATAL_FAILURE(checkJacobians(bad, c.values, "corrupted"), "analytic");
+    }
+  }
+  const Case c = landmarkCases().back();  // PosePoint3
+  const CorruptedFactor bad(c.factor, 1, 4);
+  EXPECT_NONFATAL_FAILURE(checkJacobians(bad, c.values, "corrupted"), "analytic");
 }
 
 // ------------------------------------------------------------------ zero at measurement

@@ -53,11 +53,25 @@ TEST(RoundTrip, LandmarksIn2DAnd3D) {
   test::expectSameGraph(ds3, roundTrip(ds3));
 }
 
-TEST(RoundTrip, VictoriaParkLandmarkIdsCannotShareG2oIds) {
-  // Victoria Park numbers landmarks apart from poses; g2o cannot, so writing refuses.
+TEST(RoundTrip, VictoriaParkBecomesG2o) {
+  // Its odometry skips the ids its landmarks use, so the ids fit g2o's single id space.
   const Dataset ds = readDataset(datasetPath("victoria_park.txt"));
+  test::expectSameGraph(ds, roundTrip(ds));
+}
+
+TEST(RoundTrip, LandmarkIdThatIsAlsoAPoseIdIsRefused) {
+  // Victoria Park numbers landmarks apart from poses; g2o cannot, so writing refuses.
+  const Dataset ds =
+      parseVictoria("ODOMETRY 0 1 1 0 0 1 0 0 1 0 1
+LANDMARK 1 1 2 0 1 0 1
+", "ids.txt");
   const test::ScratchFile file(".g2o");
-  EXPECT_THROW(writeG2oGraph(file.path(), ds), DatasetError);
+  try {
+    writeG2oGraph(file.path(), ds);
+    FAIL();
+  } catch (const DatasetError& e) {
+    EXPECT_EQ(e.reason(), "landmark 1 has the id of a pose; g2o has one id space for both");
+  }
 }
 
 TEST(WriteVertices, OneLinePerVertexOfTheInputsKind) {

@@ -1,0 +1,707 @@
+#include "solvers/incremental/isam2.h"
+
+#include <ccolamd.h>
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <unordered_set>
+
+#include "solvers/backend/update_validation.h"
+#include "solvers/batch/nonlinear_optimizer.h"
+#include "solvers/factors/prior_factors.h"
+#include "solvers/problem/initial_guess.h"
+
+namespace loopd {
+
+namespace {
+
+constexpr FactorId kGaugeFactorId = std::numeric_limits<FactorId>::max();
+
+using MatMap = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+using ConstMatMap = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+
+}  // namespace
+
+Isam2Backend::Isam2Backend(BackendOptions options, Isam2Options isam)
+    : options_(std::move(options)), isam_(isam) {
+  if (isam_.relinearizeSkip < 1) isam_.relinearizeSkip = 1;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bookkeeping
+
+int Isam2Backend::addVariable(const Values& from, int slot) {
+  const int v = theta_.insertFrom(from, slot);
+  estimate_.insertFrom(from, slot);
+  dims_.push_back(varDim(theta_.type(v)));
+  cliqueOf_.push_back(-1);
+  delta_.resize(delta_.size() + kMaxVarDim, 0.0);
+  varFactors_.emplace_back();
+  affectedStamp_.push_back(-1);
+  changedStamp_.push_back(-1);
+  relinCandidate_.push_back(0);
+  scratchPos_.push_back(-1);
+  localIdx_.push_back(-1);
+  constrainedStamp_.push_back(-1);
+  movedStamp_.push_back(-1);
+  if (firstPose_ < 0 && keyKind(theta_.key(v)) == KeyKind::Pose &&
+      (theta_.type(v) == VarType::SE2 || theta_.type(v) == VarType::SE3))
+    firstPose_ = v;
+  newestVar_ = v;
+  return v;
+}
+
+void Isam2Backend::markAffected(int v) {
+  if (affectedStamp_[v] == epoch_) return;
+  affectedStamp_[v] = epoch_;
+  affected_.push_back(v);
+}
+
+int Isam2Backend::addFactor(const FactorPtr& f) {
+  const int index = static_cast<int>(factors_.size());
+  factors_.push_back(f);
+  std::array<int, kMaxFactorKeys> vars{-1, -1, -1};
+  for (int k = 0; k < f->size(); ++k) {
+    const int v = estimate_.slot(f->key(k));
+    vars[k] = v;
+    varFactors_[v].push_back(index);
+    markAffected(v);
+  }
+  factorVars_.push_back(vars);
+  factorStamp_.push_back(-1);
+  return index;
+}
+
+void Isam2Backend::removeFactor(int index) {
+  const Factor& f = *factors_[index];
+  for (int k = 0; k < f.size(); ++k) {
+    const int v = factorVars_[index][k];
+    auto& list = varFactors_[v];
+    list.erase(std::find(list.begin(), list.end(), index));
+    markAffected(v);
+  }
+  factors_[index].reset();
+}
+
+void Isam2Backend::manageGauge() {
+  if (priorCount_ == 0 && gaugeFactor_ < 0 && firstPose_ >= 0) {
+    const int v = firstPose_;
+    FactorPtr prior;
+    if (estimate_.type(v) == VarType::SE2)
+      prior = std::make_shared<PriorFactorSE2>(estimate_.key(v), estimate_.se2(v),
+                                               isam_.gaugeInformation * Eigen::Matrix3d::Identity());
+    else
+      prior = std::make_shared<PriorFactorSE3>(estimate_.key(v), estimate_.se3(v),
+                                               isam_.gaugeInformation * Mat6::Identity());
+    std::const_pointer_cast<Factor>(prior)->setId(kGaugeFactorId);
+    std::const_pointer_cast<Factor>(prior)->setRole(FactorRole::Prior);
+    gaugeFactor_ = addFactor(prior);
+  } else if (priorCount_ > 0 && gaugeFactor_ >= 0) {
+    removeFactor(gaugeFactor_);
+    gaugeFactor_ = -1;
+  }
+}
+
+double Isam2Backend::deltaMax(int v) const {
+  const double* d = &delta_[static_cast<size_t>(v) * kMaxVarDim];
+  double m = 0.0;
+  for (int i = 0; i < dims_[v]; ++i) m = std::max(m, std::abs(d[i]));
+  return m;
+}
+
+void Isam2Backend::relinearize(bool all) {
+  auto relinearizeVar = [&](int v) {
+    // θ ← θ ⊕ Δ is exactly the current estimate; Δ restarts from zero.
+    std::memcpy(theta_.data(v), estimate_.data(v), sizeof(double) * kValueStride);
+    std::fill_n(&delta_[static_cast<size_t>(v) * kMaxVarDim], kMaxVarDim, 0.0);
+    ++stats_.relinearized;
+  };
+  if (all) {
+    for (int v = 0; v < theta_.size(); ++v) {
+      relinCandidate_[v] = 0;
+      if (varFactors_[v].empty()) continue;
+      relinearizeVar(v);
+      markAffected(v);
+    }
+    relinCandidates_.clear();
+    return;
+  }
+  for (int v : relinCandidates_) {
+    relinCandidate_[v] = 0;
+    if (cliqueOf_[v] < 0 || deltaMax(v) < isam_.relinearizeThreshold) continue;
+    relinearizeVar(v);
+    // Every factor on v changes its linearization: the cliques holding those factors (the
+    // clique of the factor's first-eliminated variable) must be re-eliminated.
+    markAffected(v);
+    for (int f : varFactors_[v])
+      for (int k = 0; k < factors_[f]->size(); ++k) markAffected(factorVars_[f][k]);
+  }
+  relinCandidates_.clear();
+}
+
+int Isam2Backend::newClique() {
+  int c;
+  if (!freeCliques_.empty()) {
+    c = freeCliques_.back();
+    freeCliques_.pop_back();
+  } else {
+    c = static_cast<int>(cliques_.size());
+    cliques_.emplace_back();
+  }
+  Clique& C = cliques_[c];
+  C.parent = -1;
+  C.children.clear();
+  C.vars.clear();
+  C.offsets.clear();
+  C.marginalEpoch = -1;
+  C.topStamp = -1;
+  C.createdStamp = epoch_;
+  C.pathStamp = -1;
+  C.alive = true;
+  return c;
+}
+
+void Isam2Backend::freeClique(int c) {
+  Clique& C = cliques_[c];
+  C.alive = false;
+  std::vector<double>().swap(C.m);
+  std::vector<double>().swap(C.marginal);
+  C.children.clear();
+  C.vars.clear();
+  C.offsets.clear();
+  freeCliques_.push_back(c);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Update
+
+UpdateResult Isam2Backend::update(const BackendUpdate& u) {
+  const auto t0 = std::chrono::steady_clock::now();
+  // Complete the initial values (odometry composition), then validate before any change.
+  Values guess = u.initial;
+  predictMissingValues(u.factors, estimate_, guess);
+  validateUpdate(u, estimate_, idIndex_, guess);
+
+  ++epoch_;
+  ++updateCount_;
+  stats_ = {};
+  affected_.clear();
+  UpdateResult result;
+
+  for (int s = 0; s < guess.size(); ++s) {
+    const int v = addVariable(guess, s);
+    movedStamp_[v] = epoch_;
+    result.moved.push_back(estimate_.key(v));
+  }
+  if (!u.removals.empty()) {
+    std::unordered_set<FactorId> removed(u.removals.begin(), u.removals.end());
+    for (FactorId id : u.removals) {
+      const auto it = idIndex_.find(id);
+      if (factors_[it->second]->role() == FactorRole::Prior) --priorCount_;
+      removeFactor(it->second);
+      idIndex_.erase(it);
+    }
+    FactorGraph kept;
+    kept.reserve(graph_.size());
+    for (const auto& f : graph_.factors())
+      if (!removed.count(f->id())) kept.add(f);
+    graph_ = std::move(kept);
+  }
+  for (const auto& f : u.factors) {
+    const int index = addFactor(f);
+    idIndex_[f->id()] = index;
+    graph_.add(f);
+    if (f->role() == FactorRole::Prior) ++priorCount_;
+    for (int k = 0; k < f->size(); ++k) constrainedStamp_[factorVars_[index][k]] = epoch_;
+  }
+  manageGauge();
+  if (updateCount_ % isam_.relinearizeSkip == 0) relinearize(false);
+  result.relinearized = stats_.relinearized;
+
+  recompute();
+  backSubstitute(&result.moved);
+
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return result;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Re-elimination of the top
+
+void Isam2Backend::recompute() {
+  // 1. The top: cliques holding affected variables, and all their ancestors.
+  std::vector<int> topCliques, topVars, orphans;
+  auto listVar = [&](int v) {
+    if (scratchPos_[v] >= 0 || varFactors_[v].empty()) return;
+    scratchPos_[v] = static_cast<int>(topVars.size());
+    topVars.push_back(v);
+  };
+  for (int v : affected_) {
+    int c = cliqueOf_[v];
+    if (c < 0) {
+      listVar(v);
+      continue;
+    }
+    while (c >= 0 && cliques_[c].topStamp != epoch_) {
+      cliques_[c].topStamp = epoch_;
+      topCliques.push_back(c);
+      c = cliques_[c].parent;
+    }
+  }
+  for (int c : topCliques) {
+    const Clique& C = cliques_[c];
+    for (int i = 0; i < C.numFrontals; ++i) {
+      const int v = C.vars[i];
+      cliqueOf_[v] = -1;
+      listVar(v);
+      if (varFactors_[v].empty())  // no factor left: leaves the tree, estimate kept
+        std::fill_n(&delta_[static_cast<size_t>(v) * kMaxVarDim], kMaxVarDim, 0.0);
+    }
+    for (int ch : C.children)
+      if (cliques_[ch].topStamp != epoch_) orphans.push_back(ch);
+  }
+  if (!topCliques.empty()) {
+    roots_.erase(std::remove_if(roots_.begin(), roots_.end(),
+                                [&](int c) { return cliques_[c].topStamp == epoch_; }),
+                 roots_.end());
+    for (int c : topCliques) freeClique(c);
+  }
+  for (int o : orphans) cliques_[o].parent = -1;
+  newRoots_.clear();
+  stats_.topCliques = static_cast<int>(topCliques.size());
+  stats_.topVariables = static_cast<int>(topVars.size());
+  stats_.orphans = static_cast<int>(orphans.size());
+  const int m = static_cast<int>(topVars.size());
+  if (m == 0) return;
+
+  // 2. The rows of the top: factors entirely inside it, and the orphans' separator factors.
+  std::vector<int> topFactors;
+  for (int v : topVars)
+    for (int f : varFactors_[v]) {
+      if (factorStamp_[f] == epoch_) continue;
+      factorStamp_[f] = epoch_;
+      bool inside = true;
+      for (int k = 0; k < factors_[f]->size() && inside; ++k)
+        inside = scratchPos_[factorVars_[f][k]] >= 0;
+      if (inside) topFactors.push_back(f);
+    }
+
+  // 3. Constrained ordering (CCOLAMD): variables of the new factors last.
+  std::vector<int> order(m);
+  if (m <= 2) {
+    int next = 0;
+    for (int pass = 0; pass < 2; ++pass)
+      for (int i = 0; i < m; ++i)
+        if ((constrainedStamp_[topVars[i]] == epoch_) == (pass == 1)) order[next++] = i;
+  } else {
+    const int nrow = static_cast<int>(topFactors.size() + orphans.size());
+    std::vector<int> colCount(m + 1, 0);
+    auto forEachRowVar = [&](auto&& fn) {
+      for (int r = 0; r < static_cast<int>(topFactors.size()); ++r) {
+        const int f = topFactors[r];
+        for (int k = 0; k < factors_[f]->size(); ++k) fn(r, scratchPos_[factorVars_[f][k]]);
+      }
+      for (size_t o = 0; o < orphans.size(); ++o) {
+        const Clique& O = cliques_[orphans[o]];
+        const int r = static_cast<int>(topFactors.size() + o);
+        for (size_t i = O.numFrontals; i < O.vars.size(); ++i) fn(r, scratchPos_[O.vars[i]]);
+      }
+    };
+    int nnz = 0;
+    forEachRowVar([&](int, int col) { ++colCount[col + 1], ++nnz; });
+    std::vector<int> p(m + 1, 0);
+    for (int j = 0; j < m; ++j) p[j + 1] = p[j] + colCount[j + 1];
+    const size_t alen = ccolamd_recommended(nnz, nrow, m);
+    std::vector<int> A(alen);
+    std::vector<int> fill(p.begin(), p.end() - 1);
+    forEachRowVar([&](int r, int col) { A[fill[col]++] = r; });
+    std::vector<int> cmember(m, 0);
+    bool anyConstrained = false, allConstrained = true;
+    for (int i = 0; i < m; ++i) {
+      const bool c = constrainedStamp_[topVars[i]] == epoch_;
+      cmember[i] = c ? 1 : 0;
+      anyConstrained |= c;
+      allConstrained &= c;
+    }
+    double knobs[CCOLAMD_KNOBS];
+    int statsOut[CCOLAMD_STATS];
+    ccolamd_set_defaults(knobs);
+    const bool ok = ccolamd(nrow, m, static_cast<int>(alen), A.data(), p.data(), knobs, statsOut,
+                            (anyConstrained && !allConstrained) ? cmember.data() : nullptr);
+    if (ok) {
+      for (int k = 0; k < m; ++k) order[k] = p[k];
+    } else {
+      for (int k = 0; k < m; ++k) order[k] = k;
+    }
+  }
+  std::vector<int> ov(m);  // variable at each position
+  for (int k = 0; k < m; ++k) ov[k] = topVars[order[k]];
+  for (int k = 0; k < m; ++k) scratchPos_[ov[k]] = k;
+
+  // 4. Symbolic elimination: each row's home is its first-eliminated variable; the structure
+  //    of a variable's column is its rows' later variables plus its etree children's.
+  std::vector<int> homeStart(m + 1, 0), homeRows;
+  const int nf = static_cast<int>(topFactors.size());
+  const int nrows = nf + static_cast<int>(orphans.size());
+  std::vector<int> rowHome(nrows);
+  for (int r = 0; r < nrows; ++r) {
+    int h = m;
+    if (r < nf) {
+      const int f = topFactors[r];
+      for (int k = 0; k < factors_[f]->size(); ++k) h = std::min(h, scratchPos_[factorVars_[f][k]]);
+    } else {
+      const Clique& O = cliques_[orphans[r - nf]];
+      for (size_t i = O.numFrontals; i < O.vars.size(); ++i) h = std::min(h, scratchPos_[O.vars[i]]);
+    }
+    rowHome[r] = h;
+    ++homeStart[h + 1];
+  }
+  for (int k = 0; k < m; ++k) homeStart[k + 1] += homeStart[k];
+  homeRows.resize(nrows);
+  {
+    std::vector<int> fill(homeStart.begin(), homeStart.end() - 1);
+    for (int r = 0; r < nrows; ++r) homeRows[fill[rowHome[r]]++] = r;
+  }
+  std::vector<std::vector<int>> structure(m);
+  std::vector<int> etParent(m, -1), childHead(m, -1), childNext(m, -1), mark(m, -1);
+  for (int k = 0; k < m; ++k) {
+    std::vector<int>& s = structure[k];
+    mark[k] = k;
+    auto add = [&](int q) {
+      if (mark[q] != k) {
+        mark[q] = k;
+        s.push_back(q);
+      }
+    };
+    for (int i = homeStart[k]; i < homeStart[k + 1]; ++i) {
+      const int r = homeRows[i];
+      if (r < nf) {
+        const int f = topFactors[r];
+        for (int j = 0; j < factors_[f]->size(); ++j) add(scratchPos_[factorVars_[f][j]]);
+      } else {
+        const Clique& O = cliques_[orphans[r - nf]];
+        for (size_t j = O.numFrontals; j < O.vars.size(); ++j) add(scratchPos_[O.vars[j]]);
+      }
+    }
+    for (int c = childHead[k]; c >= 0; c = childNext[c])
+      for (int q : structure[c]) add(q);
+    std::sort(s.begin(), s.end());
+    if (!s.empty()) {
+      etParent[k] = s.front();
+      childNext[k] = childHead[s.front()];
+      childHead[s.front()] = k;
+    }
+  }
+
+  // 5. Cliques, from the root down: a variable joins its parent's clique when its structure
+  //    is exactly that clique's variables.
+  std::vector<int> cliqueAt(m, -1), created;
+  std::vector<int> firstFrontal;  // per created clique (index in `created`)
+  std::vector<int> createdIndex;  // clique id → index in created (sized lazily)
+  for (int k = m - 1; k >= 0; --k) {
+    const int p = etParent[k];
+    if (p >= 0) {
+      const int C = cliqueAt[p];
+      const int ci = createdIndex[C];
+      if (firstFrontal[ci] == p && structure[k].size() == structure[p].size() + 1) {
+        cliques_[C].vars.push_back(ov[k]);  // frontals collected last-eliminated first
+        ++cliques_[C].numFrontals;
+        firstFrontal[ci] = k;
+        cliqueAt[k] = C;
+        continue;
+      }
+    }
+    const int c = newClique();
+    if (static_cast<int>(createdIndex.size()) <= c) createdIndex.resize(cliques_.size(), -1);
+    createdIndex[c] = static_cast<int>(created.size());
+    created.push_back(c);
+    firstFrontal.push_back(k);
+    Clique& C = cliques_[c];
+    C.vars.push_back(ov[k]);
+    C.numFrontals = 1;
+    C.parent = p >= 0 ? cliqueAt[p] : -1;
+    cliqueAt[k] = c;
+  }
+  for (size_t i = 0; i < created.size(); ++i) {
+    const int c = created[i];
+    Clique& C = cliques_[c];
+    std::reverse(C.vars.begin(), C.vars.end());
+    // Separator = structure of the last frontal.
+    const int last = scratchPos_[C.vars.back()];
+    for (int q : structure[last]) C.vars.push_back(ov[q]);
+    C.offsets.resize(C.vars.size() + 1);
+    C.offsets[0] = 0;
+    for (size_t j = 0; j < C.vars.size(); ++j) C.offsets[j + 1] = C.offsets[j] + dims_[C.vars[j]];
+    C.nf = C.offsets[C.numFrontals];
+    C.n = C.offsets.back();
+    for (int j = 0; j < C.numFrontals; ++j) cliqueOf_[C.vars[j]] = c;
+    if (C.parent >= 0) cliques_[C.parent].children.push_back(c);
+    else newRoots_.push_back(c);
+  }
+  for (int o : orphans) {
+    Clique& O = cliques_[o];
+    int h = m;
+    for (size_t j = O.numFrontals; j < O.vars.size(); ++j) h = std::min(h, scratchPos_[O.vars[j]]);
+    O.parent = cliqueAt[h];
+    cliques_[O.parent].children.push_back(o);
+  }
+  roots_.insert(roots_.end(), newRoots_.begin(), newRoots_.end());
+
+  // 6. Numeric elimination, children before parents (reverse creation order).
+  for (size_t i = created.size(); i-- > 0;) {
+    Clique& C = cliques_[created[i]];
+    for (size_t j = 0; j < C.vars.size(); ++j) localIdx_[C.vars[j]] = static_cast<int>(j);
+    for (int attempt = 0;; ++attempt) {
+      C.m.assign(static_cast<size_t>(C.n) * C.n + C.n, 0.0);
+      for (int j = 0; j < C.numFrontals; ++j) {
+        const int k = scratchPos_[C.vars[j]];
+        for (int h = homeStart[k]; h < homeStart[k + 1]; ++h)
+          if (homeRows[h] < nf) linearizeInto(topFactors[homeRows[h]], C);
+      }
+      for (int ch : C.children) accumulateChild(cliques_[ch], C);
+      if (attempt > 0) {
+        // Singular frontal block (an unconstrained gauge or variable): damp it so the update
+        // still completes; the affected directions stay where they were.
+        const double lambda = 1e-9 * std::pow(100.0, attempt);
+        for (int j = 0; j < C.nf; ++j) {
+          double& d = C.m[static_cast<size_t>(j) * C.n + j];
+          d += lambda * (1.0 + std::abs(d));
+        }
+      }
+      if (factorizeClique(C) || attempt >= 6) break;
+    }
+    for (int v : C.vars) localIdx_[v] = -1;
+  }
+  for (int v : topVars) scratchPos_[v] = -1;
+}
+
+void Isam2Backend::linearizeInto(int factor, Clique& C) {
+  const Factor& f = *factors_[factor];
+  const int nk = f.size(), dim = f.dim();
+  const auto& fv = factorVars_[factor];
+  const double* x[kMaxFactorKeys];
+  double r[kMaxResidualDim];
+  JacobianBlock J[kMaxFactorKeys];
+  double* Jp[kMaxFactorKeys];
+  for (int k = 0; k < nk; ++k) {
+    x[k] = theta_.data(fv[k]);
+    Jp[k] = J[k].data();
+  }
+  f.evaluate(x, r, Jp);
+  const int n = C.n;
+  double* H = C.m.data();
+  double* b = H + static_cast<size_t>(n) * n;
+  for (int a = 0; a < nk; ++a) {
+    const int oa = C.offsets[localIdx_[fv[a]]], da = dims_[fv[a]];
+    const double* Ja = J[a].data();
+    for (int i = 0; i < da; ++i) {
+      double s = 0.0;
+      for (int k = 0; k < dim; ++k) s += Ja[i * dim + k] * r[k];
+      b[oa + i] -= s;
+    }
+    for (int bb = a; bb < nk; ++bb) {
+      const int ob = C.offsets[localIdx_[fv[bb]]], db = dims_[fv[bb]];
+      const double* Jb = J[bb].data();
+      for (int j = 0; j < db; ++j)
+        for (int i = 0; i < da; ++i) {
+          double s = 0.0;
+          for (int k = 0; k < dim; ++k) s += Ja[i * dim + k] * Jb[j * dim + k];
+          H[static_cast<size_t>(ob + j) * n + oa + i] += s;
+          if (bb != a) H[static_cast<size_t>(oa + i) * n + ob + j] += s;
+        }
+    }
+  }
+}
+
+void Isam2Backend::accumulateChild(const Clique& child, Clique& C) {
+  const int cn = child.n, cnf = child.nf, n = C.n;
+  const double* Hc = child.m.data();
+  const double* bc = Hc + static_cast<size_t>(cn) * cn;
+  double* H = C.m.data();
+  double* b = H + static_cast<size_t>(n) * n;
+  const int nv = static_cast<int>(child.vars.size());
+  for (int ia = child.numFrontals; ia < nv; ++ia) {
+    const int ca = child.offsets[ia], da = child.offsets[ia + 1] - ca;
+    const int oa = C.offsets[localIdx_[child.vars[ia]]];
+    for (int i = 0; i < da; ++i) b[oa + i] += bc[ca + i];
+    for (int ib = child.numFrontals; ib < nv; ++ib) {
+      const int cb = child.offsets[ib], db = child.offsets[ib + 1] - cb;
+      const int ob = C.offsets[localIdx_[child.vars[ib]]];
+      for (int j = 0; j < db; ++j) {
+        const double* src = Hc + static_cast<size_t>(cb + j) * cn + ca;
+        double* dst = H + static_cast<size_t>(ob + j) * n + oa;
+        for (int i = 0; i < da; ++i) dst[i] += src[i];
+      }
+    }
+  }
+  (void)cnf;
+}
+
+bool Isam2Backend::factorizeClique(Clique& C) {
+  const int n = C.n, nf = C.nf, ns = n - nf;
+  double* M = C.m.data();
+  MatMap H(M, n, n, Eigen::OuterStride<>(n));
+  Eigen::Ref<Eigen::MatrixXd> HFF = H.topLeftCorner(nf, nf);
+  Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>> llt(HFF);
+  if (llt.info() != Eigen::Success) return false;
+  const auto L = HFF.triangularView<Eigen::Lower>();
+  Eigen::Map<Eigen::VectorXd> bF(M + static_cast<size_t>(n) * n, nf);
+  L.solveInPlace(bF);
+  if (ns > 0) {
+    Eigen::Ref<Eigen::MatrixXd> HSF = H.bottomLeftCorner(ns, nf);
+    L.transpose().solveInPlace<Eigen::OnTheRight>(HSF);  // L_SF = H_SF·L_FF⁻ᵀ
+    Eigen::Ref<Eigen::MatrixXd> HSS = H.bottomRightCorner(ns, ns);
+    HSS.selfadjointView<Eigen::Lower>().rankUpdate(HSF, -1.0);
+    for (int j = 0; j < ns; ++j)
+      for (int i = 0; i < j; ++i) HSS(i, j) = HSS(j, i);
+    Eigen::Map<Eigen::VectorXd> bS(M + static_cast<size_t>(n) * n + nf, ns);
+    bS.noalias() -= HSF * bF;
+  }
+  return true;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Wildfire back-substitution
+
+void Isam2Backend::backSubstitute(std::vector<Key>* moved) {
+  std::vector<int> stack(newRoots_.begin(), newRoots_.end());
+  while (!stack.empty()) {
+    const int c = stack.back();
+    stack.pop_back();
+    const Clique& C = cliques_[c];
+    bool solve = C.createdStamp == epoch_;
+    for (size_t i = C.numFrontals; i < C.vars.size() && !solve; ++i)
+      solve = changedStamp_[C.vars[i]] == epoch_;
+    if (!solve) continue;
+    solveClique(C, moved);
+    ++stats_.solvedCliques;
+    for (int ch : C.children) stack.push_back(ch);
+  }
+}
+
+void Isam2Backend::solveClique(const Clique& C, std::vector<Key>* moved) {
+  const int n = C.n, nf = C.nf, ns = n - nf;
+  const double* M = C.m.data();
+  if (static_cast<int>(scratch_.size()) < n) scratch_.resize(n);
+  Eigen::Map<Eigen::VectorXd> x(scratch_.data(), nf);
+  x = Eigen::Map<const Eigen::VectorXd>(M + static_cast<size_t>(n) * n, nf);
+  if (ns > 0) {
+    Eigen::Map<Eigen::VectorXd> xs(scratch_.data() + nf, ns);
+    for (size_t i = C.numFrontals; i < C.vars.size(); ++i) {
+      const int o = C.offsets[i] - nf, v = C.vars[i];
+      std::memcpy(&xs[o], &delta_[static_cast<size_t>(v) * kMaxVarDim], sizeof(double) * dims_[v]);
+    }
+    x.noalias() -= ConstMatMap(M + nf, ns, nf, Eigen::OuterStride<>(n)).transpose() * xs;
+  }
+  ConstMatMap(M, nf, nf, Eigen::OuterStride<>(n))
+      .triangularView<Eigen::Lower>()
+      .transpose()
+      .solveInPlace(x);
+  for (int i = 0; i < C.numFrontals; ++i) {
+    const int v = C.vars[i], d = dims_[v];
+    double* dv = &delta_[static_cast<size_t>(v) * kMaxVarDim];
+    const double* nv = &scratch_[C.offsets[i]];
+    double change = 0.0, size = 0.0;
+    for (int j = 0; j < d; ++j) {
+      change = std::max(change, std::abs(nv[j] - dv[j]));
+      size = std::max(size, std::abs(nv[j]));
+      dv[j] = nv[j];
+    }
+    if (change > isam_.wildfireThreshold) changedStamp_[v] = epoch_;
+    if (change > 0.0) {
+      std::memcpy(estimate_.data(v), theta_.data(v), sizeof(double) * kValueStride);
+      estimate_.retract(v, dv);
+    }
+    if (moved && change > options_.moveThreshold && movedStamp_[v] != epoch_) {
+      movedStamp_[v] = epoch_;
+      moved->push_back(estimate_.key(v));
+    }
+    if (size >= isam_.relinearizeThreshold && !relinCandidate_[v]) {
+      relinCandidate_[v] = 1;
+      relinCandidates_.push_back(v);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Converging: full relinearization until the cost stops decreasing
+
+void Isam2Backend::optimize() {
+  if (factors_.empty()) return;
+  auto cost = [&]() {
+    double c = graph_.chi2(estimate_);
+    if (gaugeFactor_ >= 0) c += factors_[gaugeFactor_]->chi2(estimate_);
+    return c;
+  };
+  auto fullStep = [&]() {
+    ++epoch_;
+    stats_ = {};
+    affected_.clear();
+    relinearize(true);
+    if (newestVar_ >= 0) constrainedStamp_[newestVar_] = epoch_;
+    recompute();
+    backSubstitute(nullptr);
+  };
+  auto revert = [&]() {  // back to θ (the estimate before the last step)
+    ++epoch_;
+    for (int v = 0; v < theta_.size(); ++v) {
+      std::memcpy(estimate_.data(v), theta_.data(v), sizeof(double) * kValueStride);
+      std::fill_n(&delta_[static_cast<size_t>(v) * kMaxVarDim], kMaxVarDim, 0.0);
+    }
+  };
+  summary_ = {};
+  summary_.initialChi2 = graph_.chi2(estimate_);
+  double previous = cost();
+  int iterations = 0;
+  bool converged = false, usedBatch = false;
+  for (int round = 0; round < 2 && !converged; ++round) {
+    for (int it = 0; it < isam_.maxFinalIterations; ++it) {
+      fullStep();
+      ++iterations;
+      const double current = cost();
+      if (!(current <= previous * (1.0 + 1e-9) + 1e-12)) {
+        revert();
+        break;
+      }
+      const double gain = previous - current;
+      previous = current;
+      if (gain <= isam_.finalRelativeTolerance * current + 1e-14) {
+        converged = true;
+        break;
+      }
+    }
+    if (converged || round == 1) break;
+    // Gauss–Newton went uphill: Levenberg–Marquardt on the whole graph, then rebuild.
+    usedBatch = true;
+    FactorGraph all = graph_;
+    if (gaugeFactor_ >= 0) all.add(factors_[gaugeFactor_]);
+    std::vector<char> fixed(estimate_.size(), 0);
+    for (int v = 0; v < estimate_.size(); ++v) fixed[v] = varFactors_[v].empty() ? 1 : 0;
+    OptimizerOptions o;
+    o.method = OptimizerMethod::LevenbergMarquardt;
+    o.maxIterations = std::max(options_.maxIterations, 100);
+    NonlinearOptimizer lm(all, estimate_, fixed, o);
+    const OptimizerResult r = lm.optimize(estimate_);
+    iterations += r.iterations;
+    previous = cost();
+  }
+  if (!converged) {
+    // Leave the tree linearized at the final estimate without taking another step.
+    ++epoch_;
+    affected_.clear();
+    relinearize(true);
+    recompute();
+  }
+  summary_.iterations = iterations;
+  summary_.finalChi2 = graph_.chi2(estimate_);
+  summary_.converged = converged;
+  summary_.stopReason = converged ? (usedBatch ? "converged (after batch LM)" : "converged")
+                                  : "iteration limit";
+}
+
+}  // namespace loopd

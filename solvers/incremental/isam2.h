@@ -1,0 +1,158 @@
+#pragma once
+// iSAM2 (Kaess et al., IJRR 2012): the incremental Bayes tree. Each update re-eliminates
+// only the "top" of the tree (cliques holding affected variables and their ancestors),
+// reusing the cached separator factor of every untouched subtree; fluid relinearization
+// (threshold β) and wildfire back-substitution (threshold α) keep the cost proportional to
+// what an update touches. Elimination is in information (Hessian) form: each clique gathers
+// its dense Hessian block from its factors and its children's separator factors, then a
+// partial Cholesky gives the conditional (L_FF, L_SF, d) and the separator factor it passes
+// up. See ../shared/ISAM2_NOTES.md.
+#include <Eigen/Core>
+#include <array>
+#include <unordered_map>
+#include <vector>
+
+#include "solvers/backend/backend.h"
+
+namespace loopd {
+
+struct Isam2Options {
+  double relinearizeThreshold = 0.1;  // β: max |Δ| component (rad or m) before relinearizing
+  int relinearizeSkip = 1;            // check for relinearization every k-th update
+  double wildfireThreshold = 0.001;   // α: descend into a subtree if a separator Δ moved more
+  double gaugeInformation = 1e8;      // internal prior on the first pose when no prior exists
+  int maxFinalIterations = 30;        // optimize(): full relinearizations at most
+  double finalRelativeTolerance = 1e-10;  // optimize(): stop when chi2 improves less
+};
+
+/// Counters of the last update (for benches and tests).
+struct Isam2UpdateStats {
+  int topCliques = 0;     // cliques re-eliminated
+  int topVariables = 0;
+  int orphans = 0;
+  int solvedCliques = 0;  // back-substitution visits
+  int relinearized = 0;
+};
+
+class Isam2Backend : public Backend {
+ public:
+  explicit Isam2Backend(BackendOptions options = {}, Isam2Options isam = {});
+
+  std::string name() const override { return "isam2"; }
+  UpdateResult update(const BackendUpdate& update) override;
+  void optimize() override;
+  const Values& estimate() const override { return estimate_; }
+  const FactorGraph& graph() const override { return graph_; }
+  Eigen::MatrixXd marginalCovariance(const std::vector<Key>& keys) override;
+  std::vector<Eigen::MatrixXd> marginals(const std::vector<Key>& keys) override;
+  SolveSummary summary() const override { return summary_; }
+
+  /// Joint marginal by sparse solves along the root paths of the keys' cliques (the general
+  /// path; marginalCovariance uses clique marginals when the keys share a clique).
+  Eigen::MatrixXd marginalCovarianceByPathSolve(const std::vector<Key>& keys);
+
+  const Values& linearizationPoint() const { return theta_; }
+  const Isam2UpdateStats& lastUpdateStats() const { return stats_; }
+  const Isam2Options& isamOptions() const { return isam_; }
+  bool hasGaugePrior() const { return gaugeFactor_ >= 0; }
+  int cliqueCount() const { return static_cast<int>(cliques_.size() - freeCliques_.size()); }
+  /// Number of variables in the root clique holding key (0 if key is not in the tree).
+  bool isInRootClique(Key key) const;
+
+ private:
+  struct Clique {
+    int parent = -1;
+    std::vector<int> children;
+    std::vector<int> vars;     // frontal variables (elimination order), then separator
+    std::vector<int> offsets;  // local scalar offset of vars[i]; size vars.size() + 1
+    int numFrontals = 0;
+    int nf = 0;  // frontal scalar dimension
+    int n = 0;   // total scalar dimension
+    // n×n column-major, then n entries: top-left L_FF (lower Cholesky factor of the frontal
+    // block), bottom-left L_SF = H_SF·L_FF⁻ᵀ, bottom-right the separator factor's Hessian
+    // (symmetric); vector: d = L_FF⁻¹·b_F, then the separator factor's b.
+    std::vector<double> m;
+    std::vector<double> marginal;  // n×n joint covariance of vars (cached per epoch)
+    long marginalEpoch = -1;
+    long topStamp = -1;
+    long createdStamp = -1;
+    long pathStamp = -1;
+    bool alive = false;
+  };
+
+  // --- bookkeeping
+  int addVariable(const Values& from, int slot);
+  int addFactor(const FactorPtr& f);
+  void removeFactor(int index);
+  void markAffected(int v);
+  void manageGauge();
+  void relinearize(bool all);
+  int newClique();
+  void freeClique(int c);
+
+  // --- elimination and solve
+  /// Re-eliminates the top formed by affected_ (constrained_ ordered last).
+  void recompute();
+  void orderTop(std::vector<int>& order);
+  void eliminateClique(int c, const std::vector<int>& homeFactorStart,
+                       const std::vector<int>& homeFactors, const std::vector<int>& framePos);
+  bool factorizeClique(Clique& C);
+  void linearizeInto(int factor, Clique& C);
+  void accumulateChild(const Clique& child, Clique& C);
+  void backSubstitute(std::vector<Key>* moved);
+  void solveClique(const Clique& C, std::vector<Key>* moved);
+  double deltaMax(int v) const;
+
+  // --- marginals
+  const std::vector<double>& cliqueMarginal(int c);
+  void computeCliqueMarginal(int c);
+  int varIndex(Key k) const;
+
+  BackendOptions options_;
+  Isam2Options isam_;
+  FactorGraph graph_;
+  Values theta_;     // linearization point
+  Values estimate_;  // θ ⊕ Δ, kept up to date in place
+  SolveSummary summary_;
+  Isam2UpdateStats stats_;
+
+  // Variables, indexed densely (= slot in theta_ and estimate_).
+  std::vector<int> dims_;
+  std::vector<int> cliqueOf_;  // clique holding the variable as frontal, −1 if not in the tree
+  std::vector<double> delta_;  // kMaxVarDim per variable
+  std::vector<std::vector<int>> varFactors_;
+  std::vector<long> affectedStamp_;
+  std::vector<long> changedStamp_;  // Δ moved by more than α in this epoch
+  std::vector<char> relinCandidate_;
+  std::vector<int> relinCandidates_;
+  std::vector<int> scratchPos_;  // per-variable scratch (elimination position), −1 when free
+  std::vector<int> localIdx_;    // per-variable scratch (index in one clique), −1 when free
+  std::vector<long> constrainedStamp_;
+  std::vector<long> movedStamp_;
+  int firstPose_ = -1;
+  int newestVar_ = -1;
+
+  // Factors, indexed densely; removed ones are null.
+  std::vector<FactorPtr> factors_;
+  std::vector<std::array<int, kMaxFactorKeys>> factorVars_;
+  std::vector<long> factorStamp_;
+  std::unordered_map<FactorId, int> idIndex_;
+  int priorCount_ = 0;
+  int gaugeFactor_ = -1;
+
+  // The tree.
+  std::vector<Clique> cliques_;
+  std::vector<int> freeCliques_;
+  std::vector<int> roots_;
+
+  // Per-update state.
+  long epoch_ = 0;
+  long updateCount_ = 0;
+  long pathCounter_ = 0;
+  std::vector<int> affected_;
+  std::vector<int> constrained_;
+  std::vector<int> newRoots_;
+  std::vector<double> scratch_;
+};
+
+}  // namespace loopd

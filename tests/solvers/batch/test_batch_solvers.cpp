@@ -1,0 +1,141 @@
+// Every batch solver reaches the best known optimum (../shared/REFERENCE.md) on every
+// dataset, from the default linear initialisation.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "robust/backend_registry.h"
+#include "solvers/io/dataset_reader.h"
+#include "solvers/problem/pose_graph_problem.h"
+
+namespace loopd {
+namespace {
+
+struct Case {
+  const char* file;
+  double bestChi2;  // REFERENCE.md; 0 = none published (check convergence only)
+};
+
+const Case kCases[] = {
+    {"intel.g2o", 45.004696},          {"manhattan.g2o", 3549.0368},
+    {"city10000.g2o", 511.98516},      {"CSAIL.g2o", 40.555129},
+    {"MIT.g2o", 41.163269},            {"kitti_00.g2o", 98.322012},
+    {"sphere2500.g2o", 1351.4019},     {"parking-garage.g2o", 1.2683848},
+    {"torus3D.g2o", 24235.274},        {"smallGrid3D.g2o", 1035.8507},
+    {"tinyGrid3D.g2o", 18.627819},     {"w100.graph", 0.0},
+    {"victoria_park.txt", 0.0},
+};
+
+std::string caseName(const testing::TestParamInfo<std::tuple<std::string, Case>>& info) {
+  std::string name = std::get<0>(info.param) + "_" + std::get<1>(info.param).file;
+  for (char& c : name)
+    if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+  return name;
+}
+
+class BatchSolverTest : public testing::TestWithParam<std::tuple<std::string, Case>> {};
+
+TEST_P(BatchSolverTest, ReachesBestKnownOptimum) {
+  const auto& [solver, c] = GetParam();
+  const io::Dataset ds = io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/" + c.file);
+  const PoseGraphProblem problem = buildProblem(ds);
+  auto backend = makeBackend(solver);
+  BackendUpdate all;
+  all.factors = problem.graph.factors();
+  all.initial = problem.initial;
+  backend->update(all);
+  const double chi2 = backend->chi2();
+  EXPECT_TRUE(backend->summary().converged) << backend->summary().stopReason;
+  if (c.bestChi2 > 0.0) {
+    EXPECT_LE(chi2, c.bestChi2 * (1.0 + 1e-4)) << c.file;
+    // Not below the best known optimum by more than its printed rounding.
+    EXPECT_GE(chi2, c.bestChi2 * (1.0 - 1e-6)) << c.file;
+  } else {
+    EXPECT_LT(chi2, backend->summary().initialChi2) << c.file;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(AllDatasets, BatchSolverTest,
+                         testing::Combine(testing::Values("lm", "gn", "dogleg"),
+                                          testing::ValuesIn(kCases)),
+                         caseName);
+
+TEST(BatchSolver, FileStartStillReachesOptimumOnEasyData) {
+  const io::Dataset ds = io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/intel.g2o");
+  const PoseGraphProblem problem = buildProblem(ds);
+  BackendOptions o;
+  o.linearInitialization = false;
+  auto backend = makeBackend("lm", o);
+  BackendUpdate all;
+  all.factors = problem.graph.factors();
+  all.initial = problem.initial;
+  backend->update(all);
+  EXPECT_LE(backend->chi2(), 45.004696 * (1.0 + 1e-4));
+}
+
+TEST(BatchSolver, MarginalsAreSymmetricPositiveDefinite) {
+  const io::Dataset ds = io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/tinyGrid3D.g2o");
+  const PoseGraphProblem problem = buildProblem(ds);
+  auto backend = makeBackend("lm");
+  BackendUpdate all;
+  all.factors = problem.graph.factors();
+  all.initial = problem.initial;
+  backend->update(all);
+  std::vector<Key> keys;
+  for (Key k : backend->estimate().keys())
+    if (k != problem.firstPose) keys.push_back(k);
+  const Eigen::MatrixXd joint = backend->marginalCovariance(keys);
+  ASSERT_EQ(joint.rows(), 6 * static_cast<int>(keys.size()));
+  EXPECT_TRUE(joint.isApprox(joint.transpose(), 1e-9));
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(joint);
+  EXPECT_GT(eig.eigenvalues().minCoeff(), 0.0);
+  // Per-key marginals equal the joint's diagonal blocks.
+  const auto blocks = backend->marginals(keys);
+  for (size_t i = 0; i < keys.size(); ++i)
+    EXPECT_TRUE(blocks[i].isApprox(joint.block<6, 6>(6 * i, 6 * i), 1e-9));
+}
+
+TEST(BatchSolver, RejectsUpdatesThatReferToUnknownThings) {
+  const io::Dataset ds = io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/tinyGrid3D.g2o");
+  const PoseGraphProblem problem = buildProblem(ds);
+  auto backend = makeBackend("lm");
+  BackendUpdate missingValue;
+  missingValue.factors = problem.graph.factors();  // no initial values
+  EXPECT_THROW(backend->update(missingValue), std::invalid_argument);
+  EXPECT_EQ(backend->graph().size(), 0);
+  BackendUpdate all;
+  all.factors = problem.graph.factors();
+  all.initial = problem.initial;
+  backend->update(all);
+  BackendUpdate unknownRemoval;
+  unknownRemoval.removals = {99999};
+  EXPECT_THROW(backend->update(unknownRemoval), std::invalid_argument);
+  BackendUpdate duplicate;
+  duplicate.factors = {problem.graph[0]};
+  EXPECT_THROW(backend->update(duplicate), std::invalid_argument);
+  EXPECT_EQ(backend->graph().size(), problem.graph.size());
+}
+
+TEST(BatchSolver, RemovingAFactorEqualsNeverAddingIt) {
+  const io::Dataset ds = io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/smallGrid3D.g2o");
+  const PoseGraphProblem problem = buildProblem(ds);
+  const int dropped = problem.graph.size() - 1;  // a loop closure at the end of the file
+  auto withRemoval = makeBackend("lm");
+  BackendUpdate all;
+  all.factors = problem.graph.factors();
+  all.initial = problem.initial;
+  withRemoval->update(all);
+  BackendUpdate removal;
+  removal.removals = {problem.graph[dropped]->id()};
+  withRemoval->update(removal);
+
+  auto without = makeBackend("lm");
+  BackendUpdate fewer = all;
+  fewer.factors.erase(fewer.factors.begin() + dropped);
+  without->update(fewer);
+  EXPECT_NEAR(withRemoval->chi2(), without->chi2(), 1e-6 * without->chi2());
+}
+
+}  // namespace
+}  // namespace loopd

@@ -1,0 +1,108 @@
+// loopd-solve as a user runs it: the CLI contract, the stats JSON, and clear failures on bad
+// input (a message naming file and line, a non-zero exit, never a crash).
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+namespace {
+
+const std::string kSolve = std::string(LOOPD_BINARY_DIR) + "/tools/loopd-solve";
+const std::string kData = LOOPD_DATASETS_DIR;
+
+struct Run {
+  int exitCode;
+  std::string output;  // stdout + stderr
+};
+
+Run run(const std::string& args) {
+  const std::string cmd = kSolve + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status), out};
+}
+
+std::string tempFile(const std::string& name, const std::string& content) {
+  const std::string path = testing::TempDir() + "/" + name;
+  std::ofstream(path) << content;
+  return path;
+}
+
+std::string slurp(const std::string& path) {
+  std::stringstream s;
+  s << std::ifstream(path).rdbuf();
+  return s.str();
+}
+
+TEST(LoopdSolve, WritesStatsEstimateAndCovariances) {
+  const std::string stats = testing::TempDir() + "/stats.json";
+  const std::string est = testing::TempDir() + "/est.g2o";
+  const std::string cov = testing::TempDir() + "/cov.txt";
+  const Run r = run(kData + "/tinyGrid3D.g2o --stats " + stats + " --out " + est +
+                    " --covariances " + cov + " --quiet");
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  EXPECT_TRUE(r.output.empty()) << "--quiet printed: " << r.output;
+  const std::string json = slurp(stats);
+  for (const char* field : {"\"solver\"", "\"input\"", "\"poses\"", "\"landmarks\"", "\"factors\"",
+                            "\"initial_chi2\"", "\"final_chi2\"", "\"iterations\"", "\"parse_s\"",
+                            "\"solve_s\"", "\"converged\"", "\"peak_rss_mb\""})
+    EXPECT_NE(json.find(field), std::string::npos) << field << " missing in " << json;
+  const std::string vertices = slurp(est);
+  EXPECT_EQ(vertices.rfind("VERTEX_SE3:QUAT 0 ", 0), 0u) << vertices.substr(0, 80);
+  // 9 poses, one line each, re-readable by loopd-solve itself.
+  EXPECT_EQ(std::count(vertices.begin(), vertices.end(), '\n'), 9);
+  const std::string covText = slurp(cov);
+  EXPECT_NE(covText.find("POSE 8 "), std::string::npos);
+}
+
+TEST(LoopdSolve, IncrementalReportsUpdateTimes) {
+  const std::string stats = testing::TempDir() + "/inc.json";
+  const Run r = run(kData + "/tinyGrid3D.g2o --incremental --stats " + stats + " --quiet");
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  const std::string json = slurp(stats);
+  for (const char* field : {"\"updates\": 9", "\"update_ms_mean\"", "\"update_ms_p99\"",
+                            "\"update_ms_max\""})
+    EXPECT_NE(json.find(field), std::string::npos) << field << " missing in " << json;
+}
+
+TEST(LoopdSolve, BadCommandLinesExitWithUsage) {
+  EXPECT_EQ(run("").exitCode, 2);
+  EXPECT_EQ(run(kData + "/intel.g2o --solver nonsense").exitCode, 2);
+  EXPECT_EQ(run(kData + "/intel.g2o --max-iterations -3").exitCode, 2);
+  EXPECT_EQ(run(kData + "/intel.g2o --bogus").exitCode, 2);
+  EXPECT_EQ(run("--help").exitCode, 0);
+}
+
+TEST(LoopdSolve, MalformedFilesNameTheLine) {
+  const std::string good = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n";
+  const struct {
+    const char* name;
+    std::string content;
+    const char* expect;
+  } cases[] = {
+      {"nan.g2o", good + "EDGE_SE2 0 1 nan 0 0 1 0 0 1 0 1\n", ":3:"},
+      {"inf.g2o", good + "EDGE_SE2 0 1 1 0 0 1 0 0 inf 0 1\n", ":3:"},
+      {"notpd.g2o", good + "EDGE_SE2 0 1 1 0 0 -1 0 0 1 0 1\n", ":3:"},
+      {"missing.g2o", good + "EDGE_SE2 0 7 1 0 0 1 0 0 1 0 1\n", ":3:"},
+      {"tag.g2o", good + "EDGE_FOO 0 1 1 0 0 1 0 0 1 0 1\n", ":3:"},
+      {"short.g2o", good + "EDGE_SE2 0 1 1 0 0 1 0 0\n", ":3:"},
+  };
+  for (const auto& c : cases) {
+    const Run r = run(tempFile(c.name, c.content) + " --quiet");
+    EXPECT_EQ(r.exitCode, 1) << c.name << ": " << r.output;
+    EXPECT_NE(r.output.find(std::string(c.name) + c.expect), std::string::npos)
+        << c.name << ": " << r.output;
+  }
+  const Run missingFile = run("/nonexistent/file.g2o --quiet");
+  EXPECT_EQ(missingFile.exitCode, 1);
+  EXPECT_NE(missingFile.output.find("/nonexistent/file.g2o"), std::string::npos);
+}
+
+}  // namespace
