@@ -65,7 +65,7 @@ NonlinearOptimizer::NonlinearOptimizer(const FactorGraph& graph, const Values& v
       bufferA_(layout_),
       bufferB_(layout_),
       cholesky_(options_.factorization) {
-  cholesky_.analyze(layout_.dimension(), layout_.columnStart(), layout_.rowIndex());
+  cholesky_.analyze(layout_);
 }
 
 void NonlinearOptimizer::report(int iteration, const LinearizationCost& cost, double trust,

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "solvers/linear/normal_equations.h"
-#include "solvers/linear/sparse_cholesky.h"
+#include "solvers/linear/hessian_factorization.h"
 
 namespace loopd {
 
@@ -37,7 +37,7 @@ struct OptimizerOptions {
   double initialLambda = 1e-10;      // LM: damping relative to diag(H); pose graphs are
                                      // badly conditioned, so start near Gauss–Newton
   double initialRadius = 1e4;        // Dogleg trust radius
-  FactorizationKind factorization = FactorizationKind::Auto;
+  FactorizationKind factorization = FactorizationKind::Block;
   std::function<void(const IterationReport&)> progress;  // called after every iteration
 };
 
@@ -62,7 +62,7 @@ class NonlinearOptimizer {
 
   const HessianLayout& layout() const { return layout_; }
   /// The Cholesky factor of the last undamped Hessian built by factorizeAt().
-  SparseCholesky& cholesky() { return cholesky_; }
+  HessianFactorization& cholesky() { return cholesky_; }
   /// Builds and factorizes the undamped Hessian at values (for marginals). False if singular.
   bool factorizeAt(const Values& values, const double* weights = nullptr);
   const OptimizerOptions& options() const { return options_; }
@@ -84,7 +84,7 @@ class NonlinearOptimizer {
   NormalEquations bufferA_, bufferB_;
   NormalEquations* current_ = &bufferA_;  // linearized at the accepted values
   NormalEquations* trial_ = &bufferB_;    // linearized at a candidate step
-  SparseCholesky cholesky_;
+  HessianFactorization cholesky_;
 };
 
 /// y = A·x for the upper-triangle CSC A of a layout (lower parts of diagonal blocks ignored).

@@ -4,28 +4,35 @@ namespace loopd::io {
 
 int vertexValueSize(VertexType t) {
   switch (t) {
-    case VertexType::SE2: return 3;
-    case VertexType::SE3: return 7;
-    case VertexType::Point2: return 2;
-    case VertexType::Point3: return 3;
+    case VertexType::SE2:
+      return 3;
+    case VertexType::SE3:
+      return 7;
+    case VertexType::Point2:
+      return 2;
+    case VertexType::Point3:
+      return 3;
   }
   return 0;
 }
 
 int edgeDimension(EdgeType t) {
   switch (t) {
-    case EdgeType::BetweenSE2: return 3;
-    case EdgeType::BetweenSE3: return 6;
-    case EdgeType::PosePoint2: return 2;
-    case EdgeType::PosePoint3: return 3;
-    case EdgeType::BearingRange2: return 2;
+    case EdgeType::BetweenSE2:
+      return 3;
+    case EdgeType::BetweenSE3:
+      return 6;
+    case EdgeType::PosePoint2:
+      return 2;
+    case EdgeType::PosePoint3:
+      return 3;
+    case EdgeType::BearingRange2:
+      return 2;
   }
   return 0;
 }
 
-int edgeMeasurementSize(EdgeType t) {
-  return t == EdgeType::BetweenSE3 ? 7 : edgeDimension(t);
-}
+int edgeMeasurementSize(EdgeType t) { return t == EdgeType::BetweenSE3 ? 7 : edgeDimension(t); }
 
 namespace {
 

@@ -16,8 +16,7 @@ std::string edgeName(const Edge& e) {
 
 }  // namespace
 
-DatasetBuilder::DatasetBuilder(const std::string& path, const char* format,
-                               bool landmarkIdsShared)
+DatasetBuilder::DatasetBuilder(const std::string& path, const char* format, bool landmarkIdsShared)
     : landmarkIdsShared_(landmarkIdsShared) {
   ds_.path = path;
   ds_.format = format;
@@ -29,14 +28,13 @@ void DatasetBuilder::noteDimension(const LineScanner& in, bool is3d) {
     ds_.is3d = is3d;
   } else if (is3d != ds_.is3d) {
     in.fail(std::string(in.tag()) + " is " + (is3d ? "3D" : "2D") + " but line " +
-            std::to_string(dimensionLine_) + " made this a " + (ds_.is3d ? "3D" : "2D") +
-            " file");
+            std::to_string(dimensionLine_) + " made this a " + (ds_.is3d ? "3D" : "2D") + " file");
   }
 }
 
 void DatasetBuilder::addVertex(const LineScanner& in, const Vertex& v) {
   noteDimension(in, is3dVertex(v.type));
-  auto& ids = v.isLandmark() && !landmarkIdsShared_ ? landmarkIds_ : poseIds_;
+  auto& ids = v.isLandmark() && !landmarkIdsShared_ ? landmarkIds_ : vertexIds_;
   const auto [it, inserted] = ids.emplace(v.id, Seen{v.isLandmark(), v.line});
   if (!inserted) {
     in.fail("vertex " + std::to_string(v.id) + " is already defined on line " +
@@ -50,8 +48,7 @@ void DatasetBuilder::addEdge(const LineScanner& in, Edge e) {
   noteDimension(in, is3dEdge(e.type));
   // Pose and landmark ids are distinct variables only when they live in separate spaces.
   if (e.from == e.to && (isBetween(e.type) || landmarkIdsShared_)) {
-    in.fail(std::string(in.tag()) + " connects vertex " + std::to_string(e.from) +
-            " to itself");
+    in.fail(std::string(in.tag()) + " connects vertex " + std::to_string(e.from) + " to itself");
   }
   e.index = static_cast<int>(ds_.edges.size());
   ds_.edges.push_back(e);
@@ -63,40 +60,36 @@ void DatasetBuilder::addEquivalence(const LineScanner& in, std::int64_t a, std::
   equivalenceLines_.push_back(in.line());
 }
 
-void DatasetBuilder::requireVertex(int line, std::int64_t id, bool landmark) const {
-  const auto& ids = landmark && !landmarkIdsShared_ ? landmarkIds_ : poseIds_;
+std::string DatasetBuilder::vertexProblem(std::int64_t id, bool landmark) const {
+  const auto& ids = landmark && !landmarkIdsShared_ ? landmarkIds_ : vertexIds_;
   const auto it = ids.find(id);
-  const char* kind = landmark ? "landmark" : "pose";
+  const std::string kind = landmark ? "landmark" : "pose";
   if (it == ids.end()) {
-    throw DatasetError(ds_.path, line,
-                       std::string(kind) + " " + std::to_string(id) +
-                           " is not defined by any vertex line in this file");
+    return kind + " " + std::to_string(id) + " is not defined by any vertex line in this file";
   }
   if (it->second.landmark != landmark) {
-    throw DatasetError(ds_.path, line,
-                       "vertex " + std::to_string(id) + " (line " +
-                           std::to_string(it->second.line) + ") is a " +
-                           (landmark ? "pose" : "landmark") + ", but is used as a " + kind);
+    return "vertex " + std::to_string(id) + " (line " + std::to_string(it->second.line) +
+           ") is a " + (landmark ? "pose" : "landmark") + ", but is used as a " + kind;
   }
+  return {};
 }
 
 Dataset DatasetBuilder::finish() {
   if (ds_.edges.empty()) throw DatasetError(ds_.path, 0, "the file has no edges");
-  if (ds_.hadVertices) {
-    for (const Edge& e : ds_.edges) {
-      try {
-        requireVertex(e.line, e.from, false);
-        requireVertex(e.line, e.to, !isBetween(e.type));
-      } catch (const DatasetError& err) {
-        throw DatasetError(ds_.path, e.line, edgeName(e) + ": " + err.reason());
-      }
-    }
-    for (std::size_t i = 0; i < ds_.equivalences.size(); ++i) {
-      requireVertex(equivalenceLines_[i], ds_.equivalences[i].first, false);
-      requireVertex(equivalenceLines_[i], ds_.equivalences[i].second, false);
-    }
-  } else {
+  if (!ds_.hadVertices) {
     initialiseFromOdometry(ds_, landmarkIdsShared_);
+    return std::move(ds_);
+  }
+  for (const Edge& e : ds_.edges) {
+    std::string why = vertexProblem(e.from, false);
+    if (why.empty()) why = vertexProblem(e.to, !isBetween(e.type));
+    if (!why.empty()) throw DatasetError(ds_.path, e.line, edgeName(e) + ": " + why);
+  }
+  for (std::size_t i = 0; i < ds_.equivalences.size(); ++i) {
+    const auto [a, b] = ds_.equivalences[i];
+    std::string why = vertexProblem(a, false);
+    if (why.empty()) why = vertexProblem(b, false);
+    if (!why.empty()) throw DatasetError(ds_.path, equivalenceLines_[i], why);
   }
   return std::move(ds_);
 }

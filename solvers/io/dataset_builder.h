@@ -29,8 +29,8 @@ class DatasetBuilder {
 
  private:
   void noteDimension(const LineScanner& in, bool is3d);
-  /// Fails on `line` unless `id` is a defined vertex of the wanted kind.
-  void requireVertex(int line, std::int64_t id, bool landmark) const;
+  /// Why `id` is not a defined vertex of the wanted kind; empty when it is.
+  std::string vertexProblem(std::int64_t id, bool landmark) const;
 
   Dataset ds_;
   bool landmarkIdsShared_;
@@ -39,9 +39,9 @@ class DatasetBuilder {
     bool landmark;
     int line;
   };
-  std::unordered_map<std::int64_t, Seen> poseIds_;
-  std::unordered_map<std::int64_t, Seen> landmarkIds_;  // unused when ids are shared
-  std::vector<int> equivalenceLines_;                    // parallel to ds_.equivalences
+  std::unordered_map<std::int64_t, Seen> vertexIds_;    // all vertices, or poses only
+  std::unordered_map<std::int64_t, Seen> landmarkIds_;  // when landmarks have their own ids
+  std::vector<int> equivalenceLines_;                   // parallel to ds_.equivalences
 };
 
 }  // namespace loopd::io::detail

@@ -13,21 +13,30 @@ namespace {
 
 const char* vertexTag(VertexType t) {
   switch (t) {
-    case VertexType::SE2: return "VERTEX_SE2";
-    case VertexType::SE3: return "VERTEX_SE3:QUAT";
-    case VertexType::Point2: return "VERTEX_XY";
-    case VertexType::Point3: return "VERTEX_TRACKXYZ";
+    case VertexType::SE2:
+      return "VERTEX_SE2";
+    case VertexType::SE3:
+      return "VERTEX_SE3:QUAT";
+    case VertexType::Point2:
+      return "VERTEX_XY";
+    case VertexType::Point3:
+      return "VERTEX_TRACKXYZ";
   }
   return nullptr;
 }
 
 const char* edgeTag(EdgeType t) {
   switch (t) {
-    case EdgeType::BetweenSE2: return "EDGE_SE2";
-    case EdgeType::BetweenSE3: return "EDGE_SE3:QUAT";
-    case EdgeType::PosePoint2: return "EDGE_SE2_XY";
-    case EdgeType::PosePoint3: return "EDGE_SE3_TRACKXYZ";
-    case EdgeType::BearingRange2: return nullptr;
+    case EdgeType::BetweenSE2:
+      return "EDGE_SE2";
+    case EdgeType::BetweenSE3:
+      return "EDGE_SE3:QUAT";
+    case EdgeType::PosePoint2:
+      return "EDGE_SE2_XY";
+    case EdgeType::PosePoint3:
+      return "EDGE_SE3_TRACKXYZ";
+    case EdgeType::BearingRange2:
+      return nullptr;
   }
   return nullptr;
 }
@@ -109,9 +118,9 @@ void writeG2oGraph(const std::string& path, const Dataset& graph) {
   appendVertices(out, graph);
   for (const Edge& e : graph.edges) {
     if (!edgeTag(e.type)) {
-      throw DatasetError(path, 0,
-                         "edge " + std::to_string(e.index) + " is bearing-range, which g2o "
-                         "cannot express");
+      throw DatasetError(
+          path, 0,
+          "edge " + std::to_string(e.index) + " is bearing-range, which g2o cannot express");
     }
     out.edge(e);
   }

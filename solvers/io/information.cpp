@@ -37,12 +37,18 @@ bool factorAndMaybeInvert(Information& m, bool invert) {
 
 bool positiveDefinite(Information& m, int dim, bool invert) {
   switch (dim) {
-    case 1: return factorAndMaybeInvert<1>(m, invert);
-    case 2: return factorAndMaybeInvert<2>(m, invert);
-    case 3: return factorAndMaybeInvert<3>(m, invert);
-    case 4: return factorAndMaybeInvert<4>(m, invert);
-    case 5: return factorAndMaybeInvert<5>(m, invert);
-    case 6: return factorAndMaybeInvert<6>(m, invert);
+    case 1:
+      return factorAndMaybeInvert<1>(m, invert);
+    case 2:
+      return factorAndMaybeInvert<2>(m, invert);
+    case 3:
+      return factorAndMaybeInvert<3>(m, invert);
+    case 4:
+      return factorAndMaybeInvert<4>(m, invert);
+    case 5:
+      return factorAndMaybeInvert<5>(m, invert);
+    case 6:
+      return factorAndMaybeInvert<6>(m, invert);
   }
   return false;
 }

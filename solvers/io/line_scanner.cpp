@@ -29,12 +29,13 @@ std::string readWholeFile(const std::string& path) {
   char chunk[1 << 16];
   for (;;) {
     const std::size_t n = std::fread(chunk, 1, sizeof chunk, f.get());
+    // fopen succeeds on a directory; the read reports EISDIR. Check before errno can change.
+    if (n < sizeof chunk && std::ferror(f.get())) {
+      throw DatasetError(path, 0, std::strerror(errno));
+    }
     data.append(chunk, n);
-    if (n < sizeof chunk) break;
+    if (n < sizeof chunk) return data;
   }
-  // fopen succeeds on a directory; the read reports EISDIR.
-  if (std::ferror(f.get())) throw DatasetError(path, 0, std::strerror(errno));
-  return data;
 }
 
 std::string quoted(std::string_view token) {
@@ -73,9 +74,7 @@ bool LineScanner::next() {
 
 namespace {
 
-std::string numbers(std::size_t n) {
-  return std::to_string(n) + (n == 1 ? " number" : " numbers");
-}
+std::string numbers(std::size_t n) { return std::to_string(n) + (n == 1 ? " number" : " numbers"); }
 
 }  // namespace
 
@@ -119,6 +118,8 @@ double LineScanner::number(std::size_t i) const {
   return v;
 }
 
-void LineScanner::fail(const std::string& reason) const { throw DatasetError(path_, line_, reason); }
+void LineScanner::fail(const std::string& reason) const {
+  throw DatasetError(path_, line_, reason);
+}
 
 }  // namespace loopd::io::detail

@@ -98,10 +98,10 @@ struct PoseIds {
 
 // A between edge seen from one of its ends.
 struct Arc {
-  int from;     // pose index we leave
-  int to;       // pose index we reach
-  int edge;     // index into ds.edges
-  bool forward; // true when the edge reads from → to
+  int from;      // pose index we leave
+  int to;        // pose index we reach
+  int edge;      // index into ds.edges
+  bool forward;  // true when the edge reads from → to
 };
 
 template <class Pose>
@@ -126,8 +126,9 @@ std::vector<Pose> composePoses(const Dataset& ds, const PoseIds& poses) {
   }
 
   // 0-1 breadth-first search: odometry arcs (between poses next to each other in id order)
-  // cost 0, others 1, so the tree follows the odometry chain as far as it goes. A pose is placed when it leaves the queue for the first time, by
-  // which point the pose it was reached from is placed.
+  // cost 0, others 1, so the tree follows the odometry chain as far as it goes. A pose is placed
+  // when it leaves the queue for the first time, by which point the pose it was reached from is
+  // placed.
   struct Node {
     int cost = INT_MAX;
     Arc via{};
@@ -190,8 +191,9 @@ void initialise(Dataset& ds, bool landmarkIdsShared) {
   for (const Edge& e : ds.edges) {
     if (isBetween(e.type)) continue;
     if (landmarkIdsShared && poses.contains(e.to)) {
-      throw DatasetError(ds.path, e.line,
-                         "id " + std::to_string(e.to) + " is used both as a pose and as a landmark");
+      throw DatasetError(
+          ds.path, e.line,
+          "id " + std::to_string(e.to) + " is used both as a pose and as a landmark");
     }
     if (seen.insert(e.to).second) {
       ds.landmarks.push_back(Geometry<Pose>::landmark(X[poses.indexOf(e.from)], e));

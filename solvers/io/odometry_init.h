@@ -10,9 +10,10 @@ namespace loopd::io::detail {
 ///
 /// The spanning tree is a breadth-first walk from the lowest pose id that takes an odometry
 /// edge (between poses next in id order, written either way, e.g. 4 -> 5, or 4 -> 6 when 5 is
-/// a landmark) before any other, so a loop closure never replaces the odometry chain: X_b = X_a·Z forwards, X_a = X_b·Z⁻¹ backwards, the lowest id
-/// at the identity. Throws DatasetError naming a pose the between edges do not reach, or (when
-/// `landmarkIdsShared`) an id used both as a pose and as a landmark.
+/// a landmark) before any other, so a loop closure never replaces the odometry chain: X_b = X_a·Z
+/// forwards, X_a = X_b·Z⁻¹ backwards, the lowest id at the identity. Throws DatasetError naming a
+/// pose the between edges do not reach, or (when `landmarkIdsShared`) an id used both as a pose and
+/// as a landmark.
 void initialiseFromOdometry(Dataset& ds, bool landmarkIdsShared);
 
 }  // namespace loopd::io::detail

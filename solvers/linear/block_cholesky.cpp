@@ -46,11 +46,60 @@ bool factorPanelFixed(double* P, int nr) {
   }
   D.template triangularView<Eigen::Lower>() = M;
   if (nr > W) {
+    // B ← B·L⁻ᵀ column by column (each column a contiguous, vectorised sweep).
     Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, W>, 0, Stride> B(P + W, nr - W, W, Stride(nr));
-    M.template triangularView<Eigen::Lower>().solveInPlace(B.transpose());
+    for (int j = 0; j < W; ++j) {
+      auto cj = B.col(j);
+      for (int t = 0; t < j; ++t) cj -= M(j, t) * B.col(t);
+      cj *= 1.0 / M(j, j);
+    }
   }
   return true;
 }
+
+// Eigen's level-3 kernels take their packing buffers from the stack (alloca) when they fit in
+// EIGEN_STACK_ALLOCATION_LIMIT (128 KiB) and from the heap otherwise; every call below is cut
+// into tiles of at most kTile rows, columns and depth so that they always fit: no heap
+// allocation, and the packing cost stays ~1% of the tile's flops.
+constexpr int kTile = 128;
+
+// C (m×n, ldc) −= A (m×k, lda) · B (n×k, ldb)ᵀ, or C = A·Bᵀ when assign. lowerOnly: entries
+// (i, j) with i < j are not needed and whole tiles above the diagonal are skipped.
+void gemmNT(int m, int n, int k, const double* A, int lda, const double* B, int ldb, double* C,
+            int ldc, bool lowerOnly, bool assign) {
+  for (int j0 = 0; j0 < n; j0 += kTile) {
+    const int nn = std::min(kTile, n - j0);
+    for (int i0 = 0; i0 < m; i0 += kTile) {
+      const int mm = std::min(kTile, m - i0);
+      if (lowerOnly && i0 + mm <= j0) continue;
+      MatMap Ct(C + static_cast<long>(j0) * ldc + i0, mm, nn, Stride(ldc));
+      for (int k0 = 0; k0 < k; k0 += kTile) {
+        const int kk = std::min(kTile, k - k0);
+        ConstMatMap At(A + static_cast<long>(k0) * lda + i0, mm, kk, Stride(lda));
+        ConstMatMap Bt(B + static_cast<long>(k0) * ldb + j0, nn, kk, Stride(ldb));
+        if (!assign)
+          Ct.noalias() -= At * Bt.transpose();
+        else if (k0 == 0)
+          Ct.noalias() = At * Bt.transpose();
+        else
+          Ct.noalias() += At * Bt.transpose();
+      }
+    }
+  }
+}
+
+// X (m×w, ldx) ← X · L⁻ᵀ for the w×w lower-triangular L (ldl), in row chunks.
+void trsmRightLowerT(const double* L, int w, int ldl, double* X, int m, int ldx) {
+  ConstMatMap Lm(L, w, w, Stride(ldl));
+  for (int i0 = 0; i0 < m; i0 += kTile) {
+    MatMap Xt(X + i0, std::min(kTile, m - i0), w, Stride(ldx));
+    Lm.triangularView<Eigen::Lower>().solveInPlace(Xt.transpose());
+  }
+}
+
+// Wide panels: left-looking over column blocks of kPanelBlock (GEMM update of the block
+// column from the columns left of it, unblocked LLT of its diagonal block, TRSM below).
+constexpr int kPanelBlock = 64;
 
 bool factorPanel(double* P, int nr, int nc) {
   switch (nc) {
@@ -59,14 +108,48 @@ bool factorPanel(double* P, int nr, int nc) {
     case 6: return factorPanelFixed<6>(P, nr);
     default: break;
   }
-  MatMap D(P, nc, nc, Stride(nr));
-  if (Eigen::internal::llt_inplace<double, Eigen::Lower>::blocked(D) >= 0) return false;
-  if (!pivotsOk(P, nr, nc)) return false;
-  if (nr > nc) {
-    MatMap B(P + nc, nr - nc, nc, Stride(nr));
-    D.triangularView<Eigen::Lower>().solveInPlace(B.transpose());
+  for (int k = 0; k < nc; k += kPanelBlock) {
+    const int bs = std::min(kPanelBlock, nc - k);
+    double* Pk = P + static_cast<long>(k) * nr + k;  // (k, k)
+    if (k > 0) gemmNT(nr - k, bs, k, P + k, nr, P + k, nr, Pk, nr, true, false);
+    MatMap D(Pk, bs, bs, Stride(nr));
+    if (Eigen::internal::llt_inplace<double, Eigen::Lower>::unblocked(D) >= 0) return false;
+    if (nr > k + bs) trsmRightLowerT(Pk, bs, nr, Pk + bs, nr - k - bs, nr);
   }
-  return true;
+  return pivotsOk(P, nr, nc);
+}
+
+// Solve helpers on one panel's diagonal block (lower part, leading dimension nr).
+constexpr int kSolveChunk = 256;  // rows per gathered/scattered chunk (stack buffer)
+
+// x ← L11⁻¹ x
+void lowerSolve(const double* P, int nr, int nc, double* x) {
+  if (nc > 32) {
+    Eigen::Map<Eigen::VectorXd> xv(x, nc);
+    ConstMatMap(P, nc, nc, Stride(nr)).triangularView<Eigen::Lower>().solveInPlace(xv);
+    return;
+  }
+  for (int j = 0; j < nc; ++j) {
+    const double* Lj = P + static_cast<long>(j) * nr;
+    const double xj = x[j] / Lj[j];
+    x[j] = xj;
+    for (int i = j + 1; i < nc; ++i) x[i] -= Lj[i] * xj;
+  }
+}
+
+// x ← L11⁻ᵀ x
+void upperSolve(const double* P, int nr, int nc, double* x) {
+  if (nc > 32) {
+    Eigen::Map<Eigen::VectorXd> xv(x, nc);
+    ConstMatMap(P, nc, nc, Stride(nr)).transpose().triangularView<Eigen::Upper>().solveInPlace(xv);
+    return;
+  }
+  for (int j = nc - 1; j >= 0; --j) {
+    const double* Lj = P + static_cast<long>(j) * nr;
+    double sum = x[j];
+    for (int i = j + 1; i < nc; ++i) sum -= Lj[i] * x[i];
+    x[j] = sum / Lj[j];
+  }
 }
 
 }  // namespace
@@ -122,19 +205,17 @@ bool BlockCholesky::factorize(const std::vector<double>& values) {
       int p = pos;
       while (p < ndrow && rd[p] < c1) ++p;
       const int ndrow1 = p - pos, ndrow2 = ndrow - pos;
-      ConstMatMap A(L + valueStart[d] + pos, ndrow2, ncd, Stride(ndrow));
-      const auto B = A.topRows(ndrow1);
+      const double* Ad = L + valueStart[d] + pos;  // rows pos.. of d's panel
       if (map[rd[ndrow - 1]] - map[rd[pos]] == ndrow2 - 1) {
         // d's remaining rows are a contiguous run of this panel's rows: update in place.
-        MatMap T(Ls + static_cast<long>(rd[pos] - c0) * nr + map[rd[pos]], ndrow2, ndrow1,
-                 Stride(nr));
-        T.noalias() -= A * B.transpose();
+        gemmNT(ndrow2, ndrow1, ncd, Ad, ndrow, Ad, ndrow,
+               Ls + static_cast<long>(rd[pos] - c0) * nr + map[rd[pos]], nr, true, false);
       } else {
-        MatMap C(update_.data(), ndrow2, ndrow1, Stride(ndrow2));
-        C.noalias() = A * B.transpose();
+        double* C = update_.data();
+        gemmNT(ndrow2, ndrow1, ncd, Ad, ndrow, Ad, ndrow, C, ndrow2, true, true);
         for (int j = 0; j < ndrow1; ++j) {
           double* col = Ls + static_cast<long>(rd[pos + j] - c0) * nr;
-          const double* cc = C.data() + static_cast<long>(j) * ndrow2;
+          const double* cc = C + static_cast<long>(j) * ndrow2;
           const int* rr = rd + pos;
           for (int i = j; i < ndrow2; ++i) col[map[rr[i]]] -= cc[i];
         }
@@ -189,13 +270,26 @@ void BlockCholesky::solve(const double* b, double* x, int ncols) const {
       const int* rs = rows + rowStart[s];
       const int nr = rowStart[s + 1] - rowStart[s];
       const double* P = L + valueStart[s];
-      ConstMatMap D(P, nc, nc, Stride(nr));
-      Eigen::Map<Eigen::VectorXd> xs(v + c0, nc);
-      D.triangularView<Eigen::Lower>().solveInPlace(xs);
-      for (int c = 0; c < nc; ++c) {
-        const double xc = xs[c];
-        const double* Lc = P + static_cast<long>(c) * nr;
-        for (int i = nc; i < nr; ++i) v[rs[i]] -= Lc[i] * xc;
+      double* xs = v + c0;
+      lowerSolve(P, nr, nc, xs);
+      Eigen::Map<const Eigen::VectorXd> xv(xs, nc);
+      for (int i0 = nc; i0 < nr; i0 += kSolveChunk) {
+        const int m = std::min(kSolveChunk, nr - i0);
+        alignas(64) double tmp[kSolveChunk];
+        if (nc <= 8) {  // narrow (2D poses, landmarks): plain column sweeps beat GEMV setup
+          const double* Lc = P + i0;
+          for (int i = 0; i < m; ++i) tmp[i] = Lc[i] * xs[0];
+          for (int c = 1; c < nc; ++c) {
+            Lc += nr;
+            const double xc = xs[c];
+            for (int i = 0; i < m; ++i) tmp[i] += Lc[i] * xc;
+          }
+        } else {
+          Eigen::Map<Eigen::VectorXd> t(tmp, m);
+          t.noalias() = ConstMatMap(P + i0, m, nc, Stride(nr)) * xv;
+        }
+        const int* r = rs + i0;
+        for (int i = 0; i < m; ++i) v[r[i]] -= tmp[i];
       }
     }
     // Backward: Lᵀ x = y.
@@ -204,15 +298,26 @@ void BlockCholesky::solve(const double* b, double* x, int ncols) const {
       const int* rs = rows + rowStart[s];
       const int nr = rowStart[s + 1] - rowStart[s];
       const double* P = L + valueStart[s];
-      Eigen::Map<Eigen::VectorXd> xs(v + c0, nc);
-      for (int c = 0; c < nc; ++c) {
-        const double* Lc = P + static_cast<long>(c) * nr;
-        double sum = 0.0;
-        for (int i = nc; i < nr; ++i) sum += Lc[i] * v[rs[i]];
-        xs[c] -= sum;
+      double* xs = v + c0;
+      Eigen::Map<Eigen::VectorXd> xv(xs, nc);
+      for (int i0 = nc; i0 < nr; i0 += kSolveChunk) {
+        const int m = std::min(kSolveChunk, nr - i0);
+        alignas(64) double tmp[kSolveChunk];
+        const int* r = rs + i0;
+        for (int i = 0; i < m; ++i) tmp[i] = v[r[i]];
+        if (nc <= 8) {
+          for (int c = 0; c < nc; ++c) {
+            const double* Lc = P + static_cast<long>(c) * nr + i0;
+            double sum = 0.0;
+            for (int i = 0; i < m; ++i) sum += Lc[i] * tmp[i];
+            xs[c] -= sum;
+          }
+        } else {
+          xv.noalias() -= ConstMatMap(P + i0, m, nc, Stride(nr)).transpose() *
+                          Eigen::Map<const Eigen::VectorXd>(tmp, m);
+        }
       }
-      ConstMatMap D(P, nc, nc, Stride(nr));
-      D.triangularView<Eigen::Lower>().transpose().solveInPlace(xs);
+      upperSolve(P, nr, nc, xs);
     }
     // v ← Pᵀ v.
     for (int c = 0; c < ncycles; ++c) {

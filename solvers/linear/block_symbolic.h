@@ -42,9 +42,9 @@ struct BlockSymbolic {
   int maxRows = 0;          // largest panel row count
 };
 
-/// Throws std::invalid_argument if the arrays are inconsistent (sizes, rows out of range or
-/// below the diagonal block, blocks outside 1..6 scalars is allowed up to any size but the
-/// kernels are tuned for ≤ 6).
+/// Throws std::invalid_argument if the arrays are inconsistent (sizes, empty blocks, rows out of
+/// range or below their column's diagonal block). Any block size works; the numeric kernels
+/// are tuned for 1..6.
 void analyzeBlockPattern(const std::vector<int>& blockOffsets, const std::vector<int>& columnStart,
                          const std::vector<int>& rowIndex, BlockSymbolic& out);
 

@@ -11,6 +11,7 @@ SparseCholesky::SparseCholesky(FactorizationKind kind) {
   common_.error_handler = nullptr;
   common_.quick_return_if_not_posdef = 1;
   switch (kind) {
+    case FactorizationKind::Block:  // not a CHOLMOD mode; behave as Auto
     case FactorizationKind::Auto: common_.supernodal = CHOLMOD_AUTO; break;
     case FactorizationKind::Supernodal: common_.supernodal = CHOLMOD_SUPERNODAL; break;
     case FactorizationKind::Simplicial: common_.supernodal = CHOLMOD_SIMPLICIAL; break;
@@ -34,6 +35,7 @@ void SparseCholesky::analyze(int n, const std::vector<int>& columnStart,
   if (factor_) cholmod_free_factor(&factor_, &common_);
   if (matrix_) {
     matrix_->p = matrix_->i = matrix_->x = nullptr;
+    matrix_->nzmax = 0;
     cholmod_free_sparse(&matrix_, &common_);
   }
   n_ = n;
@@ -41,6 +43,10 @@ void SparseCholesky::analyze(int n, const std::vector<int>& columnStart,
   rowIndex_ = rowIndex;
   matrix_ = cholmod_allocate_sparse(n, n, 0, 1, 1, 1, CHOLMOD_PATTERN, &common_);
   if (!matrix_) throw std::runtime_error("CHOLMOD: cannot allocate matrix header");
+  // cholmod_allocate_sparse also allocated p (n+1) and i (max(1, nzmax)); free them before
+  // pointing the header at our own arrays, or every analyze() leaks them.
+  matrix_->p = cholmod_free(static_cast<size_t>(n) + 1, sizeof(int), matrix_->p, &common_);
+  matrix_->i = cholmod_free(matrix_->nzmax, sizeof(int), matrix_->i, &common_);
   matrix_->p = columnStart_.data();
   matrix_->i = rowIndex_.data();
   matrix_->nzmax = rowIndex_.size();

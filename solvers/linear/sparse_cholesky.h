@@ -8,11 +8,12 @@
 
 namespace loopd {
 
-enum class FactorizationKind { Auto, Supernodal, Simplicial };
+/// Block: loopd's block-supernodal Cholesky (block_cholesky.h); the others are CHOLMOD's.
+enum class FactorizationKind { Block, Auto, Supernodal, Simplicial };
 
 class SparseCholesky {
  public:
-  explicit SparseCholesky(FactorizationKind kind = FactorizationKind::Auto);
+  explicit SparseCholesky(FactorizationKind kind = FactorizationKind::Auto);  // not Block
   ~SparseCholesky();
   SparseCholesky(const SparseCholesky&) = delete;
   SparseCholesky& operator=(const SparseCholesky&) = delete;

@@ -13,12 +13,12 @@ namespace {
 const std::string kSolve = std::string(LOOPD_BINARY_DIR) + "/tools/loopd-solve";
 const std::string kData = LOOPD_DATASETS_DIR;
 
-struct Run {
+struct RunResult {
   int exitCode;
   std::string output;  // stdout + stderr
 };
 
-Run run(const std::string& args) {
+RunResult run(const std::string& args) {
   const std::string cmd = kSolve + " " + args + " 2>&1";
   FILE* p = popen(cmd.c_str(), "r");
   std::string out;
@@ -45,7 +45,7 @@ TEST(LoopdSolve, WritesStatsEstimateAndCovariances) {
   const std::string stats = testing::TempDir() + "/stats.json";
   const std::string est = testing::TempDir() + "/est.g2o";
   const std::string cov = testing::TempDir() + "/cov.txt";
-  const Run r = run(kData + "/tinyGrid3D.g2o --stats " + stats + " --out " + est +
+  const RunResult r = run(kData + "/tinyGrid3D.g2o --stats " + stats + " --out " + est +
                     " --covariances " + cov + " --quiet");
   ASSERT_EQ(r.exitCode, 0) << r.output;
   EXPECT_TRUE(r.output.empty()) << "--quiet printed: " << r.output;
@@ -64,7 +64,7 @@ TEST(LoopdSolve, WritesStatsEstimateAndCovariances) {
 
 TEST(LoopdSolve, IncrementalReportsUpdateTimes) {
   const std::string stats = testing::TempDir() + "/inc.json";
-  const Run r = run(kData + "/tinyGrid3D.g2o --incremental --stats " + stats + " --quiet");
+  const RunResult r = run(kData + "/tinyGrid3D.g2o --incremental --stats " + stats + " --quiet");
   ASSERT_EQ(r.exitCode, 0) << r.output;
   const std::string json = slurp(stats);
   for (const char* field : {"\"updates\": 9", "\"update_ms_mean\"", "\"update_ms_p99\"",
@@ -95,12 +95,12 @@ TEST(LoopdSolve, MalformedFilesNameTheLine) {
       {"short.g2o", good + "EDGE_SE2 0 1 1 0 0 1 0 0\n", ":3:"},
   };
   for (const auto& c : cases) {
-    const Run r = run(tempFile(c.name, c.content) + " --quiet");
+    const RunResult r = run(tempFile(c.name, c.content) + " --quiet");
     EXPECT_EQ(r.exitCode, 1) << c.name << ": " << r.output;
     EXPECT_NE(r.output.find(std::string(c.name) + c.expect), std::string::npos)
         << c.name << ": " << r.output;
   }
-  const Run missingFile = run("/nonexistent/file.g2o --quiet");
+  const RunResult missingFile = run("/nonexistent/file.g2o --quiet");
   EXPECT_EQ(missingFile.exitCode, 1);
   EXPECT_NE(missingFile.output.find("/nonexistent/file.g2o"), std::string::npos);
 }

@@ -117,7 +117,8 @@ void checkJacobians(const Factor& f, const Values& values, const std::string& la
   }
   std::array<JacobianBlock, kMaxFactorKeys> jac;
   for (auto& b : jac) b.fill(std::numeric_limits<double>::quiet_NaN());
-  double* J[kMaxFactorKeys] = {jac[0].data(), jac[1].data(), jac[2].data()};
+  double* J[kMaxFactorKeys];
+  for (int i = 0; i < kMaxFactorKeys; ++i) J[i] = jac[i].data();
   double r[kMaxResidualDim];
   f.evaluate(x.data(), r, J);
   const VectorXd r0 = f.whitenedError(values);
@@ -149,7 +150,8 @@ void checkJacobians(const Factor& f, const Values& values, const std::string& la
   for (int skip = 0; skip < f.size(); ++skip) {
     std::array<JacobianBlock, kMaxFactorKeys> jac2;
     for (auto& b : jac2) b.fill(-7.0);
-    double* J2[kMaxFactorKeys] = {jac2[0].data(), jac2[1].data(), jac2[2].data()};
+    double* J2[kMaxFactorKeys];
+    for (int i = 0; i < kMaxFactorKeys; ++i) J2[i] = jac2[i].data();
     J2[skip] = nullptr;
     double r2[kMaxResidualDim];
     f.evaluate(x.data(), r2, J2);
@@ -407,6 +409,22 @@ TEST(FactorResidual, ZeroAtMeasurement) {
       EXPECT_LT(f->chi2(v), 1e-18) << f->typeName();
     }
   }
+}
+
+TEST(FactorResidual, BearingRangeLandmarkOnThePoseIsFinite) {
+  Values v;
+  v.insert(poseKey(0), SE2(1.0, 2.0, 0.3));
+  v.insertPoint2(landmarkKey(0), Vec2(1.0, 2.0));
+  const BearingRangeFactor2 f(poseKey(0), landmarkKey(0), Vec2(0.5, 1.0), Eigen::Matrix2d::Identity());
+  const double* x[2] = {v.data(0), v.data(1)};
+  double r[2];
+  JacobianBlock j0, j1;
+  double* J[2] = {j0.data(), j1.data()};
+  f.evaluate(x, r, J);
+  EXPECT_TRUE(std::isfinite(r[0]) && std::isfinite(r[1]));
+  for (int i = 0; i < 6; ++i) EXPECT_TRUE(std::isfinite(j0[i]));
+  for (int i = 0; i < 4; ++i) EXPECT_TRUE(std::isfinite(j1[i]));
+  EXPECT_NEAR(r[1], -1.0, 1e-6);  // range residual 0 − 1
 }
 
 // ----------------------------------------------------------------- chi2, independently

@@ -48,7 +48,8 @@ TEST(RoundTrip, LandmarksIn2DAnd3D) {
       "VERTEX_TRACKXYZ 9 1 1 1\n"
       "EDGE_SE3:QUAT 0 1 1 2 3 0.1 0.2 0.3 0.9 "
       "10 1 0 0 0 0 10 0 0 0 0 10 0 0 0 20 1 0 20 1 20\n"
-      "EDGE_SE3_TRACKXYZ 1 9 0.5 0.5 0.5" + info3 + "\n",
+      "EDGE_SE3_TRACKXYZ 1 9 0.5 0.5 0.5" +
+          info3 + "\n",
       "lm3.g2o");
   test::expectSameGraph(ds3, roundTrip(ds3));
 }
@@ -62,9 +63,7 @@ TEST(RoundTrip, VictoriaParkBecomesG2o) {
 TEST(RoundTrip, LandmarkIdThatIsAlsoAPoseIdIsRefused) {
   // Victoria Park numbers landmarks apart from poses; g2o cannot, so writing refuses.
   const Dataset ds =
-      parseVictoria("ODOMETRY 0 1 1 0 0 1 0 0 1 0 1
-LANDMARK 1 1 2 0 1 0 1
-", "ids.txt");
+      parseVictoria("ODOMETRY 0 1 1 0 0 1 0 0 1 0 1\nLANDMARK 1 1 2 0 1 0 1\n", "ids.txt");
   const test::ScratchFile file(".g2o");
   try {
     writeG2oGraph(file.path(), ds);
@@ -83,8 +82,7 @@ TEST(WriteVertices, OneLinePerVertexOfTheInputsKind) {
   std::string line;
   std::size_t count = 0;
   while (std::getline(lines, line)) {
-    EXPECT_EQ(line.rfind("VERTEX_SE2 " + std::to_string(ds.poses[count].id) + " ", 0), 0u)
-        << line;
+    EXPECT_EQ(line.rfind("VERTEX_SE2 " + std::to_string(ds.poses[count].id) + " ", 0), 0u) << line;
     ++count;
   }
   EXPECT_EQ(count, ds.poses.size());

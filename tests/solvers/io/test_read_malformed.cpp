@@ -101,8 +101,9 @@ TEST(Malformed, InformationNotPositiveDefinite) {
   expectError(V0 + V1 + "EDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n", 3, why);  // negative
   expectError(V0 + V1 + "EDGE_SE2 0 1 1 0 0 0 0 0 0 0 0\n", 3, why);   // zero
   expectError(V0 + V1 + "EDGE_SE2 0 1 1 0 0 1 2 0 1 0 1\n", 3, why);   // indefinite
-  expectError(Q0 + Q1 + "EDGE_SE3:QUAT 0 1 1 0 0 0 0 0 1 1 0 0 0 0 0 1 0 0 0 0 1 0 0 0 1 0 0 1 0 0\n",
-              3, "EDGE_SE3:QUAT information matrix is not positive definite");
+  expectError(
+      Q0 + Q1 + "EDGE_SE3:QUAT 0 1 1 0 0 0 0 0 1 1 0 0 0 0 0 1 0 0 0 0 1 0 0 0 1 0 0 1 0 0\n", 3,
+      "EDGE_SE3:QUAT information matrix is not positive definite");
   expectError(E01 + "EDGE_SE2_XY 1 5 1 1 1 0 -1\n", 2,
               "EDGE_SE2_XY information matrix is not positive definite");
   // TORO's order: the fourth value is I33.
@@ -154,8 +155,7 @@ TEST(Malformed, VertexOfTheWrongKind) {
 }
 
 TEST(Malformed, DuplicateVertex) {
-  expectError(V0 + V1 + "VERTEX_SE2 0 2 2 2\n" + E01, 3,
-              "vertex 0 is already defined on line 1");
+  expectError(V0 + V1 + "VERTEX_SE2 0 2 2 2\n" + E01, 3, "vertex 0 is already defined on line 1");
   expectError(V0 + "VERTEX_XY 0 1 1\n", 2, "vertex 0 is already defined on line 1");
 }
 
@@ -212,8 +212,8 @@ TEST(WellFormed, VerticesMayFollowEdges) {
 }
 
 TEST(WellFormed, VictoriaLandmarkMayShareAnIdWithAPose) {
-  const Dataset ds = parseVictoria("ODOMETRY 0 1 1 0 0 1 0 0 1 0 1\nLANDMARK 1 1 2 0 1 0 1\n",
-                                   "ids.txt");
+  const Dataset ds =
+      parseVictoria("ODOMETRY 0 1 1 0 0 1 0 0 1 0 1\nLANDMARK 1 1 2 0 1 0 1\n", "ids.txt");
   ASSERT_EQ(ds.landmarks.size(), 1u);
   EXPECT_EQ(ds.landmarks[0].id, 1);
   EXPECT_NEAR(ds.landmarks[0].value[0], 3.0, 1e-15);
@@ -225,10 +225,11 @@ TEST(WellFormed, FixLinesAreAccepted) {
 }
 
 TEST(WellFormed, QuaternionsAreNormalised) {
-  const Dataset ds =
-      parseG2o("VERTEX_SE3:QUAT 0 0 0 0 0 0 0 2\nVERTEX_SE3:QUAT 1 0 0 0 0 0 3 4\n"
-               "EDGE_SE3:QUAT 0 1 0 0 0 0 0 0.6 0.8" + kInfo6 + "\n",
-               "quat.g2o");
+  const Dataset ds = parseG2o(
+      "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 2\nVERTEX_SE3:QUAT 1 0 0 0 0 0 3 4\n"
+      "EDGE_SE3:QUAT 0 1 0 0 0 0 0 0.6 0.8" +
+          kInfo6 + "\n",
+      "quat.g2o");
   EXPECT_EQ(ds.poses[0].value[6], 1.0);
   EXPECT_DOUBLE_EQ(ds.poses[1].value[5], 0.6);
   EXPECT_DOUBLE_EQ(ds.poses[1].value[6], 0.8);

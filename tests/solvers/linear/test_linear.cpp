@@ -137,7 +137,8 @@ Dense denseNormalEquations(const FactorGraph& graph, const Values& values,
     std::array<const double*, kMaxFactorKeys> x{};
     for (int k = 0; k < factor.size(); ++k) x[k] = values.data(values.slot(factor.key(k)));
     std::array<JacobianBlock, kMaxFactorKeys> jac{};
-    double* J[kMaxFactorKeys] = {jac[0].data(), jac[1].data(), jac[2].data()};
+    double* J[kMaxFactorKeys];
+    for (int i = 0; i < kMaxFactorKeys; ++i) J[i] = jac[i].data();
     VectorXd r(factor.dim());
     factor.evaluate(x.data(), r.data(), J);
     MatrixXd Jrow = MatrixXd::Zero(factor.dim(), n);

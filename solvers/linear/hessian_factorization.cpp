@@ -1,0 +1,35 @@
+#include "solvers/linear/hessian_factorization.h"
+
+namespace loopd {
+
+HessianFactorization::HessianFactorization(FactorizationKind kind) : kind_(kind) {
+  if (kind_ != FactorizationKind::Block) cholmod_ = std::make_unique<SparseCholesky>(kind_);
+}
+
+void HessianFactorization::analyze(const HessianLayout& layout) {
+  if (cholmod_)
+    cholmod_->analyze(layout.dimension(), layout.columnStart(), layout.rowIndex());
+  else
+    block_.analyze(layout.blockOffsets(), layout.columnStart(), layout.rowIndex());
+}
+
+bool HessianFactorization::factorize(const std::vector<double>& values) {
+  return cholmod_ ? cholmod_->factorize(values) : block_.factorize(values);
+}
+
+void HessianFactorization::solve(const double* b, double* x, int ncols) {
+  if (cholmod_)
+    cholmod_->solve(b, x, ncols);
+  else
+    block_.solve(b, x, ncols);
+}
+
+double HessianFactorization::flops() const {
+  return cholmod_ ? cholmod_->flops() : block_.flops();
+}
+
+long HessianFactorization::factorNonZeros() const {
+  return cholmod_ ? cholmod_->factorNonZeros() : block_.factorNonZeros();
+}
+
+}  // namespace loopd

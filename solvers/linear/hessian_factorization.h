@@ -1,0 +1,34 @@
+#pragma once
+// The Cholesky factorization the batch solvers use for a HessianLayout's matrix: the
+// block-supernodal one (default, fastest on pose graphs) or CHOLMOD (for comparison).
+#include <memory>
+#include <vector>
+
+#include "solvers/linear/block_cholesky.h"
+#include "solvers/linear/hessian_layout.h"
+#include "solvers/linear/sparse_cholesky.h"
+
+namespace loopd {
+
+class HessianFactorization {
+ public:
+  /// kind: Block, or a CHOLMOD variant (Auto, Supernodal, Simplicial).
+  explicit HessianFactorization(FactorizationKind kind = FactorizationKind::Block);
+
+  void analyze(const HessianLayout& layout);
+  /// False if the matrix is not (numerically) positive definite.
+  bool factorize(const std::vector<double>& values);
+  /// x = H⁻¹b for ncols columns (column-major n×ncols).
+  void solve(const double* b, double* x, int ncols = 1);
+
+  FactorizationKind kind() const { return kind_; }
+  double flops() const;
+  long factorNonZeros() const;
+
+ private:
+  FactorizationKind kind_;
+  BlockCholesky block_;
+  std::unique_ptr<SparseCholesky> cholmod_;
+};
+
+}  // namespace loopd
