@@ -1,0 +1,53 @@
+#pragma once
+// FactorBatchValidator: everything about a factor_batch_t that can be judged without the
+// graph (static: fields, enums, limits, finite numbers, dimensions, key kinds, positive-definite
+// noise, unique ids) and what needs it (context: ids new for the sender, removals of live ids,
+// variable types consistent with the graph). A batch is accepted only with no issue at all;
+// every issue becomes one error_t.
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "loopd/factor_batch_t.hpp"
+#include "solvers/core/values.h"
+
+namespace loopd::server {
+
+struct Issue {
+  std::int64_t factorId = -1;  // offending item id; −1 = the whole batch / an initial value
+  std::int8_t code = 0;        // error_t code
+  std::string reason;
+};
+
+/// What the contextual checks need to know about the graph (implemented by the engine).
+class GraphView {
+ public:
+  virtual ~GraphView() = default;
+  /// Type of a variable already in the graph (or staged), nullopt if unknown.
+  virtual std::optional<VarType> varType(Key k) const = 0;
+  /// The pose type (SE2/SE3) of a robot's trajectory, nullopt if the robot has no pose yet.
+  virtual std::optional<VarType> robotPoseType(std::uint32_t robot) const = 0;
+  /// Whether this sender already used the id (live or removed).
+  virtual bool idUsed(const std::string& sender, std::int64_t id) const = 0;
+  /// Whether this sender's id names a live factor or ambiguous group.
+  virtual bool idLive(const std::string& sender, std::int64_t id) const = 0;
+};
+
+class FactorBatchValidator {
+ public:
+  /// Static checks; empty = well-formed.
+  std::vector<Issue> check(const loopd::factor_batch_t& batch) const;
+  /// Checks of one factor (also used for ambiguous alternatives).
+  void checkFactor(const loopd::factor_t& f, std::int64_t reportId, std::vector<Issue>& out) const;
+  /// Checks against the graph: ids, removals, variable types. Run after check() passed.
+  std::vector<Issue> checkContext(const loopd::factor_batch_t& batch, const GraphView& graph) const;
+
+  /// Ambiguous groups are refused until a multi-hypothesis solver is active.
+  bool acceptAmbiguous = false;
+};
+
+/// "sender 'robot1' seq 12: factor 43: reason" for logs.
+std::string describe(const loopd::factor_batch_t& b, const Issue& issue);
+
+}  // namespace loopd::server

@@ -1,0 +1,198 @@
+#pragma once
+// The engine: the one thread that owns the Backend. It takes raw messages from the LCM thread
+// (or a journal being resumed), decodes, de-duplicates, validates and stages batches, holds
+// those that refer to poses not introduced yet, journals what it accepts, applies each round
+// of staged batches as one Backend update (coalescing what arrived while it solved), runs
+// commands, and publishes estimates, covariances, status and errors.
+//
+// Multi-robot (Kim et al. 2010): robot r's poses live in its own frame; its first pose gets a
+// strong prior at its initial value (identity unless the front-end sent one). When an
+// inter-robot between factor first joins r to s, anchor variables A = makeKey(robot, Anchor, 0)
+// are created (the first robot of the group at identity with a strong prior; the joining one
+// at A_s = A_r·x_r·Z·x_s⁻¹, so nothing jumps, with no prior: the inter-robot factor determines
+// it, so the optimum equals the single-frame one) and the factor becomes an
+// AnchoredBetweenFactor on (A_r, x_r, A_s, x_s). Joining two groups removes the joined group's
+// root prior (its anchors then follow the factor). Removing inter-robot factors regroups the
+// robots; a group left without a root prior gets one at its current value. Estimates are
+// published as A_r ⊕ x_r.
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "loopd/command_t.hpp"
+#include "loopd/factor_batch_t.hpp"
+#include "server/batch_validator.h"
+#include "server/journal.h"
+#include "server/publisher.h"
+#include "server/session_table.h"
+#include "solvers/backend/backend.h"
+
+namespace loopd::server {
+
+struct EngineOptions {
+  std::string solver = "lm";
+  int publishEvery = 50;             // full estimate snapshot every N updates (0 = never)
+  double idleSeconds = 0.5;          // input pause before optimize() + converged publish
+  int holdMaxBatches = 1000;         // held batches at most (oldest expire first)
+  double holdSeconds = 30.0;         // a held batch expires after this long
+  double priorInformation = 1e8;     // first-pose and root-anchor priors
+  int maxMessageBytes = 256 * 1024;  // larger messages are refused before decoding
+  double heartbeatSeconds = 1.0;
+};
+
+struct Inbound {
+  std::string channel;
+  std::vector<std::uint8_t> bytes;
+};
+
+struct EngineCounters {
+  std::int64_t accepted = 0, rejected = 0, duplicate = 0, expired = 0, held = 0, updates = 0,
+               decodeFailed = 0, internalErrors = 0, journaled = 0;
+};
+
+class Engine : private GraphView {
+ public:
+  Engine(EngineOptions options, Publisher& publisher, Journal* journal);
+  ~Engine() override;
+
+  /// Queues a message (any thread). Messages over maxMessageBytes are refused here.
+  void post(Inbound message);
+  /// Messages waiting for the engine.
+  int queueDepth() const;
+
+  /// One round: everything queued now, then holds, the update, publishing (engine thread).
+  /// Returns true if anything was processed.
+  bool step();
+  /// Housekeeping without input: expire holds, idle optimize, heartbeat.
+  void idle();
+  /// The engine thread's loop; returns once stop is set and the queue is drained.
+  void run(const std::atomic<bool>& stop);
+
+  /// Feeds a journal (resume). Its batches are not journaled again unless `rejournal`.
+  std::int64_t replay(const std::string& path, bool rejournal, long* validBytes);
+
+  // Introspection (engine thread, or after run() returned).
+  const Backend& backend() const { return *backend_; }
+  void setJournal(Journal* journal) { journal_ = journal; }
+  EngineCounters counters() const;
+  std::int64_t updateSeq() const { return updateSeq_; }
+  /// Common-frame pose of a robot's pose (A ⊕ x), for tests.
+  bool commonFramePose(Key pose, std::vector<double>& out) const;
+  bool robotJoined(std::uint32_t robot) const;
+
+ private:
+  struct RobotInfo {
+    VarType poseType = VarType::SE2;
+    Key firstPose = 0;
+    std::int64_t latestIndex = -1;
+    bool anchored = false;
+    std::uint32_t parent = 0;       // union-find parent (itself when root)
+    FactorId anchorPrior = 0;       // the anchor's prior factor (strong for a group root)
+  };
+  struct Owner {
+    std::string sender;
+    std::int64_t id = 0;
+    bool uncertain = false;
+  };
+  struct Decoded {
+    std::shared_ptr<const loopd::factor_batch_t> batch;
+    std::shared_ptr<const Inbound> raw;
+    bool replayed = false;
+  };
+  struct Staged {
+    Decoded d;
+    BackendUpdate update;
+    std::map<std::uint32_t, RobotInfo> robotsBefore;
+    std::vector<std::pair<std::int64_t, FactorId>> addedIds;    // sender ids → FactorIds
+    std::vector<std::pair<std::int64_t, FactorId>> removedIds;
+    std::vector<Owner> owners;  // parallel to update.factors (sender id −1: server-owned)
+  };
+  struct Held {
+    Decoded d;
+    std::chrono::steady_clock::time_point since;
+    std::vector<Key> waiting;
+  };
+  enum class StageResult { Staged, Hold, Rejected };
+
+  // GraphView
+  std::optional<VarType> varType(Key k) const override;
+  std::optional<VarType> robotPoseType(std::uint32_t robot) const override;
+  bool idUsed(const std::string& sender, std::int64_t id) const override;
+  bool idLive(const std::string& sender, std::int64_t id) const override;
+
+  void handleFactors(std::shared_ptr<const Inbound> m, bool replayed);
+  void handleCommand(const Inbound& m);
+  StageResult stage(const Decoded& d, std::vector<Key>& waiting);
+  void retryHolds();
+  void expireHolds(bool all);
+  void flush();
+  void commit(Staged& s);
+  void undo(Staged& s);
+  void reject(const loopd::factor_batch_t& b, const std::vector<Issue>& issues,
+              const std::string& channel);
+
+  // values
+  const Values* holder(Key k) const;
+  bool known(Key k) const { return holder(k) != nullptr; }
+  std::uint32_t root(std::uint32_t r) const;
+  void joinRobots(std::uint32_t r, std::uint32_t s, Key xr, Key xs, const Factor& between,
+                  const Values& batchValues, Staged& st);
+  FactorPtr priorAt(Key k, const Values& from, int slot, double information);
+  FactorId newFactorId() { return nextFactorId_++; }
+
+  // publishing
+  void afterUpdate(const std::vector<Key>& moved, double seconds, bool optimizeRun);
+  void publishEstimates(const std::vector<Key>* moved, std::int64_t requestId, int onlyRobot);
+  void publishLatestCovariances();
+  void publishStatus(std::int64_t requestId, bool fullDecisions);
+  std::vector<loopd::loop_decision_t> decisionList(bool full);
+  Eigen::MatrixXd commonFrameCovariance(const std::vector<Key>& keys);
+  void rebuildBackend(const std::string& solver);
+  void resetAll();
+  void regroup(std::vector<Key>& moved);
+  void commandError(const loopd::command_t& c, std::int8_t code, const std::string& reason,
+                    const std::string& channel);
+
+  EngineOptions opt_;
+  Publisher& pub_;
+  Journal* journal_;
+  FactorBatchValidator validator_;
+  std::unique_ptr<Backend> backend_;
+
+  mutable std::mutex qmu_;
+  std::condition_variable qcv_;
+  std::deque<std::shared_ptr<const Inbound>> queue_;
+
+  SessionTable sessions_;
+  std::map<std::uint32_t, RobotInfo> robots_;
+  std::map<FactorId, FactorPtr> live_;
+  std::unordered_map<FactorId, Owner> owners_;
+  std::unordered_map<FactorId, double> lastDecisions_;
+  FactorId nextFactorId_ = 1;
+  std::int64_t loopClosures_ = 0;
+  std::map<FactorId, std::pair<std::uint32_t, std::uint32_t>> interEdges_;  // anchored factors
+  bool regroupNeeded_ = false;
+
+  std::vector<Staged> staged_;
+  Values stagedValues_;
+  std::deque<Held> holds_;
+
+  std::int64_t updateSeq_ = 0;
+  std::int64_t updatesSinceSnapshot_ = 0;
+  double lastUpdateMs_ = 0.0, sumUpdateMs_ = 0.0;
+  bool dirty_ = false;  // updated since the last optimize()
+  bool replaying_ = false;
+  std::chrono::steady_clock::time_point lastInput_, lastStatus_;
+  mutable std::mutex countersMu_;
+  EngineCounters counters_;
+};
+
+}  // namespace loopd::server

@@ -1,0 +1,153 @@
+#include "server/server_config.h"
+
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <stdexcept>
+
+#include "robust/backend_registry.h"
+
+namespace loopd::server {
+
+namespace {
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t\r\n");
+  if (b == std::string::npos) return "";
+  const auto e = s.find_last_not_of(" \t\r\n");
+  return s.substr(b, e - b + 1);
+}
+
+const char* const kKeys[] = {"lcm-url", "solver", "channel-prefix", "journal", "resume",
+                             "publish-every", "log-level", "hold-seconds", "hold-max",
+                             "idle-seconds", "config"};
+
+bool knownKey(const std::string& k) {
+  for (const char* x : kKeys)
+    if (k == x) return true;
+  return false;
+}
+
+double toDouble(const std::string& k, const std::string& v) {
+  try {
+    size_t n = 0;
+    const double d = std::stod(v, &n);
+    if (n == v.size()) return d;
+  } catch (const std::exception&) {
+  }
+  throw std::invalid_argument("--" + k + ": '" + v + "' is not a number");
+}
+
+int toInt(const std::string& k, const std::string& v) {
+  try {
+    size_t n = 0;
+    const int i = std::stoi(v, &n);
+    if (n == v.size()) return i;
+  } catch (const std::exception&) {
+  }
+  throw std::invalid_argument("--" + k + ": '" + v + "' is not an integer");
+}
+
+void apply(ServerConfig& c, const std::string& k, const std::string& v) {
+  if (k == "lcm-url") c.lcmUrl = v;
+  else if (k == "solver") c.solver = v;
+  else if (k == "channel-prefix") c.channelPrefix = v;
+  else if (k == "journal") c.journal = v;
+  else if (k == "resume") c.resume = v;
+  else if (k == "publish-every") c.publishEvery = toInt(k, v);
+  else if (k == "log-level") c.logLevel = v;
+  else if (k == "hold-seconds") c.holdSeconds = toDouble(k, v);
+  else if (k == "hold-max") c.holdMax = toInt(k, v);
+  else if (k == "idle-seconds") c.idleSeconds = toDouble(k, v);
+}
+
+void loadFile(ServerConfig& c, const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::invalid_argument("--config: cannot read " + path);
+  std::string line;
+  int n = 0;
+  while (std::getline(in, line)) {
+    ++n;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    line = trim(line);
+    if (line.empty()) continue;
+    const auto eq = line.find('=');
+    if (eq == std::string::npos)
+      throw std::invalid_argument(path + ":" + std::to_string(n) + ": expected key = value");
+    const std::string k = trim(line.substr(0, eq)), v = trim(line.substr(eq + 1));
+    if (!knownKey(k) || k == "config")
+      throw std::invalid_argument(path + ":" + std::to_string(n) + ": unknown key '" + k + "'");
+    apply(c, k, v);
+  }
+}
+
+}  // namespace
+
+std::string defaultSolver() { return isBackendName("isam2") ? "isam2" : "lm"; }
+
+ServerConfig parseServerConfig(const std::vector<std::string>& args) {
+  std::vector<std::pair<std::string, std::string>> flags;
+  ServerConfig c;
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    if (a == "--help" || a == "-h") {
+      c.help = true;
+      continue;
+    }
+    if (a.rfind("--", 0) != 0) throw std::invalid_argument("unexpected argument '" + a + "'");
+    std::string k = a.substr(2), v;
+    const auto eq = k.find('=');
+    if (eq != std::string::npos) {
+      v = k.substr(eq + 1);
+      k.resize(eq);
+    } else {
+      if (!knownKey(k)) throw std::invalid_argument("unknown flag --" + k);
+      if (i + 1 >= args.size()) throw std::invalid_argument("--" + k + " needs a value");
+      v = args[++i];
+    }
+    if (!knownKey(k)) throw std::invalid_argument("unknown flag --" + k);
+    flags.emplace_back(k, v);
+  }
+  for (const auto& [k, v] : flags)
+    if (k == "config") loadFile(c, v);
+  for (const auto& [k, v] : flags) apply(c, k, v);
+  if (c.solver.empty()) c.solver = defaultSolver();
+  if (!isBackendName(c.solver)) throw std::invalid_argument("--solver: unknown solver '" + c.solver + "'");
+  if (c.channelPrefix.size() > 53) throw std::invalid_argument("--channel-prefix: at most 53 characters");
+  if (c.publishEvery < 0) throw std::invalid_argument("--publish-every must be >= 0");
+  if (c.holdMax < 0 || c.holdSeconds < 0 || c.idleSeconds < 0)
+    throw std::invalid_argument("--hold-max, --hold-seconds and --idle-seconds must be >= 0");
+  return c;
+}
+
+std::string effectiveLcmUrl(const std::string& url) {
+  std::string u = url;
+  if (u.empty()) {
+    const char* env = std::getenv("LCM_DEFAULT_URL");
+    u = env && *env ? env : "udpm://239.255.76.67:7667?ttl=0";
+  }
+  if (u.rfind("udpm://", 0) == 0 && u.find("recv_buf_size") == std::string::npos)
+    u += (u.find('?') == std::string::npos ? "?" : "&") + std::string("recv_buf_size=4194304");
+  return u;
+}
+
+std::string serverUsage() {
+  return "usage: loopd [flags]\n"
+         "  --lcm-url URL         LCM provider (default: LCM_DEFAULT_URL or udpm://239.255.76.67:7667?ttl=0;\n"
+         "                        recv_buf_size=4194304 is added to udpm URLs without one)\n"
+         "  --solver NAME         back-end variant (default: " + defaultSolver() + ")\n"
+         "  --channel-prefix P    channel prefix (default LOOPD_): P FACTORS, COMMAND in;\n"
+         "                        ESTIMATE, COVARIANCE, STATUS, ERROR out\n"
+         "  --journal FILE        append every accepted batch to this LCM log\n"
+         "  --resume FILE         replay this journal at start-up (keeps appending if --journal is the same)\n"
+         "  --publish-every N     full estimate snapshot every N updates (default 50; 0 = only on request)\n"
+         "  --hold-seconds S      how long a batch may wait for a pose not yet introduced (default 30)\n"
+         "  --hold-max N          at most N held batches (default 1000)\n"
+         "  --idle-seconds S      input pause before iterating to convergence (default 0.5)\n"
+         "  --log-level L         trace|debug|info|warn|error|off (default info)\n"
+         "  --config FILE         `key = value` lines with the names above; flags override\n"
+         "  --help                this text\n";
+}
+
+}  // namespace loopd::server

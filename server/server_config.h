@@ -1,0 +1,31 @@
+#pragma once
+// The loopd command line and config file. The file holds `key = value` lines with the flags'
+// names (without the dashes; `#` starts a comment); flags given on the command line override it.
+#include <string>
+#include <vector>
+
+namespace loopd::server {
+
+struct ServerConfig {
+  std::string lcmUrl;                  // "" = LCM's default (LCM_DEFAULT_URL or udpm 239.255.76.67:7667)
+  std::string solver;                  // "" = isam2 if registered, else lm
+  std::string channelPrefix = "LOOPD_";
+  std::string journal;                 // append every accepted batch here
+  std::string resume;                  // replay this journal at start-up
+  int publishEvery = 50;
+  std::string logLevel = "info";
+  double holdSeconds = 30.0;
+  int holdMax = 1000;
+  double idleSeconds = 0.5;
+  bool help = false;
+};
+
+/// Parses argv (and the --config file it names). Throws std::invalid_argument on bad input.
+ServerConfig parseServerConfig(const std::vector<std::string>& args);
+std::string serverUsage();
+/// The solver used when --solver is not given.
+std::string defaultSolver();
+/// Adds recv_buf_size to a udpm URL that lacks it (resolving "" to LCM's default first).
+std::string effectiveLcmUrl(const std::string& url);
+
+}  // namespace loopd::server

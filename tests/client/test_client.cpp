@@ -1,0 +1,132 @@
+// loopd_client: batching, sequence numbers, resend (captured sink), and the subscriber's
+// assembly of chunked estimates over memq://.
+#include <gtest/gtest.h>
+#include <lcm/lcm-cpp.hpp>
+
+#include "client/estimate_subscriber.h"
+#include "client/factor_publisher.h"
+
+using namespace loopd;
+using client::KeyRef;
+using client::Pose2;
+
+namespace {
+
+struct Capture {
+  std::vector<factor_batch_t> batches;
+  std::vector<std::vector<uint8_t>> raw;
+  client::BatchSink sink() {
+    return [this](const std::string& ch, const std::vector<uint8_t>& b) {
+      EXPECT_EQ(ch, "X_FACTORS");
+      factor_batch_t m;
+      EXPECT_EQ(m.decode(b.data(), 0, static_cast<int>(b.size())), static_cast<int>(b.size()));
+      batches.push_back(m);
+      raw.push_back(b);
+    };
+  }
+};
+
+TEST(FactorPublisher, SequencesIdsAndNoiseLayout) {
+  Capture cap;
+  client::FactorPublisher pub(cap.sink(), "robot1/vio", "X_FACTORS");
+  EXPECT_EQ(pub.flush(), 0);  // nothing pending
+  Eigen::Matrix3d info;
+  info << 1, 2, 3, 2, 4, 5, 3, 5, 6;
+  EXPECT_EQ(pub.odometry(1, 0, 1, Pose2{1, 0, 0}, info), 0);
+  EXPECT_EQ(pub.loopClosure(KeyRef::pose(1, 1), KeyRef::pose(2, 7), Pose2{0, 1, 0}, info, "dcs", 2.0), 1);
+  pub.initialValue(KeyRef::pose(1, 0), Pose2{0, 0, 0});
+  EXPECT_EQ(pub.flush(), 1);
+  pub.remove(1);
+  EXPECT_EQ(pub.odometry(1, 1, 2, Pose2{1, 0, 0}, info, 50), 50);
+  EXPECT_EQ(pub.odometry(1, 2, 3, Pose2{1, 0, 0}, info), 51);
+  EXPECT_EQ(pub.flush(), 2);
+  ASSERT_EQ(cap.batches.size(), 2u);
+  const auto& b = cap.batches[0];
+  EXPECT_EQ(b.sender, "robot1/vio");
+  EXPECT_EQ(b.sequence, 1);
+  ASSERT_EQ(b.num_factors, 2);
+  EXPECT_EQ(b.factors[0].role, factor_t::ROLE_ODOMETRY);
+  EXPECT_EQ(b.factors[1].role, factor_t::ROLE_LOOP_CLOSURE);
+  EXPECT_EQ(b.factors[1].robust, "dcs");
+  EXPECT_EQ(b.factors[1].keys[1].robot, 2);
+  EXPECT_EQ(b.factors[0].noise, (std::vector<double>{1, 2, 3, 4, 5, 6}));  // g2o upper triangle
+  EXPECT_EQ(b.num_initial_values, 1);
+  EXPECT_EQ(cap.batches[1].sequence, 2);
+  EXPECT_EQ(cap.batches[1].remove_ids, std::vector<int64_t>{1});
+  EXPECT_TRUE(pub.resendLast());
+  ASSERT_EQ(cap.raw.size(), 3u);
+  EXPECT_EQ(cap.raw[2], cap.raw[1]);  // same bytes, same sequence
+}
+
+TEST(FactorPublisher, FlushesAtMaxItems) {
+  Capture cap;
+  client::FactorPublisher pub(cap.sink(), "a", "X_FACTORS");
+  for (int i = 0; i < 450; ++i) pub.odometry(0, i, i + 1, Pose2{1, 0, 0}, Eigen::Matrix3d::Identity());
+  pub.flush();
+  ASSERT_EQ(cap.batches.size(), 3u);
+  EXPECT_EQ(cap.batches[0].num_factors, factor_batch_t::MAX_ITEMS);
+  EXPECT_EQ(cap.batches[2].num_factors, 50);
+  EXPECT_EQ(cap.batches[2].sequence, 3);
+  EXPECT_THROW(client::FactorPublisher(cap.sink(), ""), std::invalid_argument);
+}
+
+estimate_t chunk(int64_t seq, int robot, bool full, int index, int count, std::vector<int64_t> ids) {
+  estimate_t e{};
+  e.update_seq = seq;
+  e.robot = robot;
+  e.frame_robot = 0;
+  e.common_frame = robot != 0;
+  e.full_snapshot = full;
+  e.chunk_index = index;
+  e.chunk_count = count;
+  e.pose_type = estimate_t::SE2;
+  e.pose_dim = 3;
+  e.landmark_dim = 2;
+  for (int64_t i : ids) {
+    e.pose_indices.push_back(i);
+    e.poses.push_back({double(i), double(seq), 0});
+  }
+  e.num_poses = static_cast<int16_t>(ids.size());
+  return e;
+}
+
+TEST(EstimateSubscriber, AssemblesSnapshotsAndDeltas) {
+  lcm::LCM lcm("memq://");
+  ASSERT_TRUE(lcm.good());
+  client::EstimateSubscriber sub(lcm, "X_");
+  int calls = 0;
+  sub.onEstimate([&](const client::RobotEstimate&, const estimate_t&) { ++calls; });
+  auto send = [&](const estimate_t& e) {
+    lcm.publish("X_ESTIMATE", &e);
+    lcm.handleTimeout(10);
+  };
+  send(chunk(1, 0, false, 0, 1, {0, 1, 2}));
+  EXPECT_EQ(sub.robot(0).poses.size(), 3u);
+  send(chunk(2, 0, true, 0, 2, {0, 1}));  // first half of a snapshot: not applied yet
+  EXPECT_EQ(sub.robot(0).poses.at(0)[1], 1.0);
+  send(chunk(2, 0, true, 1, 2, {5}));     // complete: replaces the table (2 is gone)
+  const auto r = sub.robot(0);
+  EXPECT_EQ(r.poses.size(), 3u);
+  EXPECT_EQ(r.poses.count(2), 0u);
+  EXPECT_EQ(r.poses.at(5)[1], 2.0);
+  send(chunk(3, 1, false, 0, 1, {9}));
+  EXPECT_TRUE(sub.robot(1).commonFrame);
+  EXPECT_EQ(sub.robots(), (std::vector<int32_t>{0, 1}));
+  EXPECT_EQ(calls, 3);
+
+  covariance_t c{};
+  c.keys = {client::wireKey(KeyRef::pose(1, 9))};
+  c.num_keys = 1;
+  c.dims = {3};
+  c.values = {1, 0, 0, 0, 2, 0, 0, 0, 3};
+  c.num_values = 9;
+  c.chunk_count = 1;
+  lcm.publish("X_COVARIANCE", &c);
+  lcm.handleTimeout(10);
+  EXPECT_EQ(sub.latestCovariances().at(1).first, 9);
+  EXPECT_EQ(sub.latestCovariances().at(1).second[4], 2.0);
+  EXPECT_EQ(client::receiveUrl("udpm://239.255.76.67:7667?ttl=0"),
+            "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304");
+}
+
+}  // namespace

@@ -1,0 +1,523 @@
+// Unit tests of the server's parts without LCM: the validator, the session table, the anchored
+// factors' Jacobians, and the engine driven directly (messages in, captured messages out).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <thread>
+#include <limits>
+#include <random>
+
+#include "client/factor_publisher.h"
+#include "loopd/command_t.hpp"
+#include "loopd/error_t.hpp"
+#include "loopd/estimate_t.hpp"
+#include "loopd/status_t.hpp"
+#include "server/anchored_between_factor.h"
+#include "server/batch_validator.h"
+#include "server/engine.h"
+#include "server/server_config.h"
+#include "server/session_table.h"
+
+using namespace loopd;
+using namespace loopd::server;
+using client::KeyRef;
+using client::Pose2;
+
+namespace {
+
+// --- helpers ------------------------------------------------------------------------------
+
+factor_t between2(std::int64_t id, int ra, std::int64_t a, int rb, std::int64_t b, Pose2 z,
+                  int8_t role = factor_t::ROLE_ODOMETRY) {
+  factor_t f{};
+  f.id = id;
+  f.type = factor_t::BETWEEN_SE2;
+  f.role = role;
+  f.keys = {client::wireKey(KeyRef::pose(ra, a)), client::wireKey(KeyRef::pose(rb, b))};
+  f.num_keys = 2;
+  f.measurement = {z.x, z.y, z.theta};
+  f.num_measurement = 3;
+  f.noise_kind = factor_t::NOISE_INFORMATION;
+  f.noise = {100, 0, 0, 100, 0, 1000};
+  f.num_noise = 6;
+  f.robust = "";
+  f.robust_param = 0;
+  return f;
+}
+
+factor_batch_t batch(const std::string& sender, std::int64_t seq, std::vector<factor_t> fs) {
+  factor_batch_t b{};
+  b.sender = sender;
+  b.sequence = seq;
+  b.factors = std::move(fs);
+  b.num_factors = static_cast<int16_t>(b.factors.size());
+  return b;
+}
+
+template <class T>
+std::vector<uint8_t> encode(const T& m) {
+  std::vector<uint8_t> buf(static_cast<size_t>(m.getEncodedSize()));
+  m.encode(buf.data(), 0, static_cast<int>(buf.size()));
+  return buf;
+}
+
+struct Captured {
+  std::vector<loopd::error_t> errors;
+  std::vector<status_t> statuses;
+  std::vector<estimate_t> estimates;
+  int covariances = 0;
+};
+
+struct EngineFixture {
+  Captured out;
+  Publisher pub;
+  Engine engine;
+  explicit EngineFixture(const std::string& solver = "lm", double holdSeconds = 30)
+      : pub(Channels::withPrefix("T_"),
+            [this](const std::string& ch, const std::vector<uint8_t>& b) {
+              if (ch == "T_ERROR") { loopd::error_t m; m.decode(b.data(), 0, static_cast<int>(b.size())); out.errors.push_back(m); }
+              if (ch == "T_STATUS") { status_t m; m.decode(b.data(), 0, static_cast<int>(b.size())); out.statuses.push_back(m); }
+              if (ch == "T_ESTIMATE") { estimate_t m; m.decode(b.data(), 0, static_cast<int>(b.size())); out.estimates.push_back(m); }
+              if (ch == "T_COVARIANCE") ++out.covariances;
+            }),
+        engine(options(solver, holdSeconds), pub, nullptr) {}
+  static EngineOptions options(const std::string& solver, double holdSeconds) {
+    EngineOptions o;
+    o.solver = solver;
+    o.holdSeconds = holdSeconds;
+    o.publishEvery = 0;
+    return o;
+  }
+  void send(const factor_batch_t& b) { engine.post({"T_FACTORS", encode(b)}); engine.step(); }
+  void sendRaw(std::vector<uint8_t> bytes) { engine.post({"T_FACTORS", std::move(bytes)}); engine.step(); }
+  void command(int8_t c, const std::string& arg = "", std::vector<loopd::key_t> keys = {}) {
+    command_t m{};
+    m.sender = "test";
+    m.request_id = 7;
+    m.command = c;
+    m.argument = arg;
+    m.keys = keys;
+    m.num_keys = static_cast<int16_t>(keys.size());
+    engine.post({"T_COMMAND", encode(m)});
+    engine.step();
+  }
+  int poses() const {
+    int n = 0;
+    for (Key k : engine.backend().estimate().keys()) n += keyKind(k) == KeyKind::Pose;
+    return n;
+  }
+};
+
+// A chain of odometry for robot r from index `from` to `to`, one batch per pose.
+void chain(EngineFixture& f, const std::string& sender, int r, int from, int to, std::int64_t& seq, std::int64_t& id) {
+  for (int i = from; i < to; ++i) f.send(batch(sender, ++seq, {between2(id++, r, i, r, i + 1, {1, 0, 0.1})}));
+}
+
+// --- validator ----------------------------------------------------------------------------
+
+TEST(FactorBatchValidator, AcceptsWellFormedBatch) {
+  FactorBatchValidator v;
+  EXPECT_TRUE(v.check(batch("a", 1, {between2(0, 0, 0, 0, 1, {1, 0, 0})})).empty());
+}
+
+TEST(FactorBatchValidator, ReportsEachProblemWithItsCode) {
+  FactorBatchValidator v;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  struct Case { std::function<void(factor_t&)> mutate; int8_t code; };
+  const std::vector<Case> cases = {
+      {[&](factor_t& f) { f.measurement[1] = nan; }, loopd::error_t::NON_FINITE},
+      {[&](factor_t& f) { f.noise[0] = std::numeric_limits<double>::infinity(); }, loopd::error_t::NON_FINITE},
+      {[&](factor_t& f) { f.noise = {1, 0, 0, -1, 0, 1}; }, loopd::error_t::NOT_POSITIVE_DEFINITE},
+      {[&](factor_t& f) { f.noise = {1, 2, 0, 1, 0, 1}; }, loopd::error_t::NOT_POSITIVE_DEFINITE},
+      {[&](factor_t& f) { f.noise.pop_back(); f.num_noise = 5; }, loopd::error_t::WRONG_DIMENSION},
+      {[&](factor_t& f) { f.measurement.pop_back(); f.num_measurement = 2; }, loopd::error_t::WRONG_DIMENSION},
+      {[&](factor_t& f) { f.keys.pop_back(); f.num_keys = 1; }, loopd::error_t::WRONG_DIMENSION},
+      {[&](factor_t& f) { f.keys[1].kind = loopd::key_t::LANDMARK; }, loopd::error_t::WRONG_KEY_KIND},
+      {[&](factor_t& f) { f.keys[1].kind = 5; }, loopd::error_t::INVALID_FIELD},
+      {[&](factor_t& f) { f.type = 42; }, loopd::error_t::INVALID_FIELD},
+      {[&](factor_t& f) { f.role = factor_t::ROLE_PRIOR; }, loopd::error_t::INVALID_FIELD},
+      {[&](factor_t& f) { f.robust = "bogus"; }, loopd::error_t::INVALID_FIELD},
+      {[&](factor_t& f) { f.robust_param = -1; }, loopd::error_t::INVALID_FIELD},
+      {[&](factor_t& f) { f.noise_kind = 0; }, loopd::error_t::INVALID_FIELD},
+      {[&](factor_t& f) { f.id = -3; }, loopd::error_t::INVALID_FIELD},
+      {[&](factor_t& f) { f.keys[1].robot = 3; }, loopd::error_t::INVALID_FIELD},  // odometry across robots
+  };
+  for (size_t i = 0; i < cases.size(); ++i) {
+    factor_t f = between2(5, 0, 0, 0, 1, {1, 0, 0});
+    cases[i].mutate(f);
+    const auto issues = v.check(batch("a", 1, {f}));
+    ASSERT_FALSE(issues.empty()) << "case " << i;
+    bool found = false;
+    for (const auto& is : issues) found |= is.code == cases[i].code;
+    EXPECT_TRUE(found) << "case " << i << ": " << issues[0].reason;
+  }
+}
+
+TEST(FactorBatchValidator, BatchLevelChecks) {
+  FactorBatchValidator v;
+  EXPECT_EQ(v.check(batch("", 1, {})).at(0).code, loopd::error_t::INVALID_FIELD);
+  EXPECT_EQ(v.check(batch(std::string(64, 'x'), 1, {})).at(0).code, loopd::error_t::LIMIT_EXCEEDED);
+  EXPECT_EQ(v.check(batch("a", 0, {})).at(0).code, loopd::error_t::INVALID_FIELD);
+  auto dup = batch("a", 1, {between2(3, 0, 0, 0, 1, {1, 0, 0}), between2(3, 0, 1, 0, 2, {1, 0, 0})});
+  EXPECT_EQ(v.check(dup).at(0).code, loopd::error_t::DUPLICATE_FACTOR_ID);
+  std::vector<factor_t> many;
+  for (int i = 0; i < 201; ++i) many.push_back(between2(i, 0, i, 0, i + 1, {1, 0, 0}));
+  EXPECT_EQ(v.check(batch("a", 1, many)).at(0).code, loopd::error_t::LIMIT_EXCEEDED);
+  factor_batch_t se3 = batch("a", 1, {});
+  initial_value_t iv{};
+  iv.key = client::wireKey(KeyRef::pose(0, 1));
+  iv.type = initial_value_t::SE3;
+  iv.value = {0, 0, 0, 0, 0, 0, 2};  // not a unit quaternion
+  iv.num_value = 7;
+  se3.initial_values = {iv};
+  se3.num_initial_values = 1;
+  EXPECT_EQ(v.check(se3).at(0).code, loopd::error_t::INVALID_FIELD);
+  iv.type = initial_value_t::POINT2;
+  se3.initial_values = {iv};
+  EXPECT_FALSE(v.check(se3).empty());
+}
+
+// --- sessions -----------------------------------------------------------------------------
+
+TEST(SessionTable, DuplicatesAndGaps) {
+  SessionTable t;
+  EXPECT_TRUE(t.receive("a", 1));
+  EXPECT_FALSE(t.receive("a", 1));
+  EXPECT_TRUE(t.receive("a", 2));
+  EXPECT_TRUE(t.receive("a", 5));
+  EXPECT_TRUE(t.receive("b", 1));
+  EXPECT_TRUE(t.hasGapBelow("a", 5));
+  EXPECT_FALSE(t.hasGapBelow("a", 3));
+  auto g = t.gaps();
+  ASSERT_EQ(g.size(), 1u);
+  EXPECT_EQ(g[0].sender, "a");
+  EXPECT_EQ(g[0].lastContiguous, 2);
+  EXPECT_EQ(g[0].highest, 5);
+  EXPECT_EQ(g[0].missing, 2);
+  EXPECT_TRUE(t.receive("a", 4));
+  EXPECT_TRUE(t.receive("a", 3));  // a late batch filling the gap
+  EXPECT_FALSE(t.receive("a", 4));
+  EXPECT_TRUE(t.gaps().empty());
+  EXPECT_FALSE(t.hasGapBelow("a", 6));
+}
+
+TEST(SessionTable, IdsAreNeverReused) {
+  SessionTable t;
+  t.addId("a", 10, 100);
+  EXPECT_TRUE(t.idLive("a", 10));
+  EXPECT_FALSE(t.idLive("b", 10));
+  EXPECT_EQ(t.removeId("a", 10), 100u);
+  EXPECT_FALSE(t.idLive("a", 10));
+  EXPECT_TRUE(t.idUsed("a", 10));
+  t.undoRemove("a", 10, 100);
+  EXPECT_TRUE(t.idLive("a", 10));
+  t.undoAdd("a", 10);
+  EXPECT_FALSE(t.idUsed("a", 10));
+}
+
+// --- anchored factors ---------------------------------------------------------------------
+
+template <class FactorT>
+void checkJacobians(const FactorT& f, Values& v, double tol) {
+  const int d = f.dim();
+  std::vector<const double*> x(4);
+  for (int i = 0; i < 4; ++i) x[static_cast<size_t>(i)] = v.data(v.slot(f.key(i)));
+  std::vector<double> r0(static_cast<size_t>(d));
+  std::array<JacobianBlock, 4> J{};
+  double* Jp[4] = {J[0].data(), J[1].data(), J[2].data(), J[3].data()};
+  f.evaluate(x.data(), r0.data(), Jp);
+  const double h = 1e-6;
+  for (int k = 0; k < 4; ++k) {
+    const int s = v.slot(f.key(k));
+    const int n = varDim(v.type(s));
+    for (int c = 0; c < n; ++c) {
+      Values vp = v, vm = v;
+      std::vector<double> dp(static_cast<size_t>(n), 0.0), dm(static_cast<size_t>(n), 0.0);
+      dp[static_cast<size_t>(c)] = h;
+      dm[static_cast<size_t>(c)] = -h;
+      vp.retract(s, dp.data());
+      vm.retract(s, dm.data());
+      std::vector<const double*> xp(4), xm(4);
+      for (int i = 0; i < 4; ++i) {
+        xp[static_cast<size_t>(i)] = vp.data(vp.slot(f.key(i)));
+        xm[static_cast<size_t>(i)] = vm.data(vm.slot(f.key(i)));
+      }
+      std::vector<double> rp(static_cast<size_t>(d)), rm(static_cast<size_t>(d));
+      f.evaluate(xp.data(), rp.data(), nullptr);
+      f.evaluate(xm.data(), rm.data(), nullptr);
+      for (int row = 0; row < d; ++row) {
+        const double num = (rp[static_cast<size_t>(row)] - rm[static_cast<size_t>(row)]) / (2 * h);
+        const double ana = J[static_cast<size_t>(k)][static_cast<size_t>(c * d + row)];
+        EXPECT_NEAR(ana, num, tol * std::max(1.0, std::abs(num))) << "key " << k << " col " << c << " row " << row;
+      }
+    }
+  }
+}
+
+TEST(AnchoredBetweenFactor, SE2JacobiansMatchNumerical) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-2, 2);
+  for (int trial = 0; trial < 20; ++trial) {
+    Values v;
+    const Key ar = makeKey(0, KeyKind::Anchor, 0), xr = poseKey(5, 0), as = makeKey(1, KeyKind::Anchor, 0),
+              xs = poseKey(9, 1);
+    v.insert(ar, SE2(u(rng), u(rng), u(rng)));
+    v.insert(xr, SE2(u(rng), u(rng), u(rng)));
+    v.insert(as, SE2(u(rng), u(rng), u(rng)));
+    v.insert(xs, SE2(u(rng), u(rng), u(rng)));
+    Eigen::Matrix3d info;
+    info << 40, 3, 1, 3, 20, 2, 1, 2, 90;
+    AnchoredBetweenFactorSE2 f(ar, xr, as, xs, SE2(u(rng), u(rng), u(rng)), info);
+    checkJacobians(f, v, 1e-5);
+  }
+}
+
+TEST(AnchoredBetweenFactor, SE3JacobiansMatchNumerical) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  auto rnd = [&] {
+    Vec6 xi;
+    for (int i = 0; i < 6; ++i) xi[i] = u(rng);
+    return expSE3(xi);
+  };
+  for (int trial = 0; trial < 20; ++trial) {
+    Values v;
+    const Key ar = makeKey(0, KeyKind::Anchor, 0), xr = poseKey(5, 0), as = makeKey(1, KeyKind::Anchor, 0),
+              xs = poseKey(9, 1);
+    v.insert(ar, rnd());
+    v.insert(xr, rnd());
+    v.insert(as, rnd());
+    v.insert(xs, rnd());
+    Mat6 info = Mat6::Identity() * 10;
+    info(0, 1) = info(1, 0) = 2;
+    info(3, 5) = info(5, 3) = 1;
+    AnchoredBetweenFactorSE3 f(ar, xr, as, xs, rnd(), info);
+    checkJacobians(f, v, 1e-5);
+  }
+}
+
+TEST(AnchoredBetweenFactor, EqualsPlainBetweenOfCommonFramePoses) {
+  const SE2 Ar(1, 2, 0.3), xr(0.5, -1, 0.2), As(-3, 1, -1), xs(2, 2, 0.7), Z(0.4, 0.1, -0.2);
+  Eigen::Matrix3d info = Eigen::Matrix3d::Identity() * 5;
+  Values v;
+  const Key ar = makeKey(0, KeyKind::Anchor, 0), pr = poseKey(1, 0), as = makeKey(1, KeyKind::Anchor, 0), ps = poseKey(1, 1);
+  v.insert(ar, Ar);
+  v.insert(pr, xr);
+  v.insert(as, As);
+  v.insert(ps, xs);
+  AnchoredBetweenFactorSE2 f(ar, pr, as, ps, Z, info);
+  Values w;
+  w.insert(poseKey(0), Ar * xr);
+  w.insert(poseKey(1), As * xs);
+  BetweenFactorSE2 g(poseKey(0), poseKey(1), Z, info);
+  EXPECT_NEAR(f.chi2(v), g.chi2(w), 1e-9);
+}
+
+// --- engine -------------------------------------------------------------------------------
+
+TEST(Engine, AppliesBatchesAndIgnoresDuplicates) {
+  EngineFixture f;
+  std::int64_t seq = 0, id = 0;
+  chain(f, "r0", 0, 0, 5, seq, id);
+  EXPECT_EQ(f.poses(), 6);
+  f.send(batch("r0", 3, {between2(99, 0, 5, 0, 6, {1, 0, 0})}));  // duplicate sequence: ignored
+  EXPECT_EQ(f.poses(), 6);
+  const auto c = f.engine.counters();
+  EXPECT_EQ(c.accepted, 5);
+  EXPECT_EQ(c.duplicate, 1);
+  EXPECT_TRUE(f.out.errors.empty());
+  // The first pose is the robot's origin (identity), the others composed from odometry.
+  std::vector<double> x;
+  ASSERT_TRUE(f.engine.commonFramePose(poseKey(0, 0), x));
+  EXPECT_NEAR(x[0], 0, 1e-6);
+  ASSERT_TRUE(f.engine.commonFramePose(poseKey(1, 0), x));
+  EXPECT_NEAR(x[0], 1, 1e-6);
+  EXPECT_FALSE(f.out.statuses.empty());
+  EXPECT_GT(f.out.covariances, 0);
+}
+
+TEST(Engine, RejectsWholeBatchAndKeepsGraph) {
+  EngineFixture f;
+  std::int64_t seq = 0, id = 0;
+  chain(f, "r0", 0, 0, 3, seq, id);
+  factor_t bad = between2(50, 0, 3, 0, 4, {1, 0, 0});
+  bad.noise = {1, 0, 0, -5, 0, 1};
+  f.send(batch("r0", ++seq, {between2(49, 0, 3, 0, 4, {1, 0, 0}), bad}));
+  EXPECT_EQ(f.poses(), 4);  // nothing of the batch applied
+  ASSERT_EQ(f.out.errors.size(), 1u);
+  EXPECT_EQ(f.out.errors[0].code, loopd::error_t::NOT_POSITIVE_DEFINITE);
+  EXPECT_EQ(f.out.errors[0].sender, "r0");
+  EXPECT_EQ(f.out.errors[0].sequence, seq);
+  EXPECT_EQ(f.out.errors[0].factor_id, 50);
+  // Reused id and unknown removal.
+  f.send(batch("r0", ++seq, {between2(0, 0, 3, 0, 4, {1, 0, 0})}));
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::DUPLICATE_FACTOR_ID);
+  factor_batch_t rm = batch("r0", ++seq, {});
+  rm.remove_ids = {12345};
+  rm.num_remove_ids = 1;
+  f.send(rm);
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::UNKNOWN_FACTOR_ID);
+  // Wrong type for a known variable: an SE3 factor on an SE2 pose.
+  factor_t se3{};
+  se3 = between2(60, 0, 2, 0, 3, {0, 0, 0}, factor_t::ROLE_LOOP_CLOSURE);
+  se3.type = factor_t::BETWEEN_SE3;
+  se3.measurement = {0, 0, 0, 0, 0, 0, 1};
+  se3.num_measurement = 7;
+  se3.noise.assign(21, 0.0);
+  for (int i : {0, 6, 11, 15, 18, 20}) se3.noise[static_cast<size_t>(i)] = 1;
+  se3.num_noise = 21;
+  f.send(batch("r0", ++seq, {se3}));
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::WRONG_DIMENSION);
+  EXPECT_EQ(f.poses(), 4);
+  EXPECT_EQ(f.engine.counters().rejected, 4);
+}
+
+TEST(Engine, HoldsOutOfOrderBatchesUntilThePoseArrives) {
+  EngineFixture f;
+  std::int64_t id = 0;
+  f.send(batch("r0", 1, {between2(id++, 0, 0, 0, 1, {1, 0, 0})}));
+  // Sequence 3 (pose 2→3) arrives before 2 (pose 1→2): held, then applied.
+  f.send(batch("r0", 3, {between2(11, 0, 2, 0, 3, {1, 0, 0})}));
+  EXPECT_EQ(f.poses(), 2);
+  EXPECT_EQ(f.out.statuses.back().batches_held, 1);
+  ASSERT_EQ(f.out.statuses.back().num_sender_gaps, 1);
+  EXPECT_EQ(f.out.statuses.back().sender_gaps[0].missing, 1);
+  f.send(batch("r0", 2, {between2(10, 0, 1, 0, 2, {1, 0, 0})}));
+  EXPECT_EQ(f.poses(), 4);
+  EXPECT_EQ(f.out.statuses.back().batches_held, 0);
+  EXPECT_EQ(f.out.statuses.back().num_sender_gaps, 0);
+  EXPECT_TRUE(f.out.errors.empty());
+}
+
+TEST(Engine, ExpiresHeldBatches) {
+  EngineFixture f("lm", 0.05);
+  f.send(batch("r0", 1, {between2(0, 0, 0, 0, 1, {1, 0, 0})}));
+  f.send(batch("r0", 3, {between2(5, 0, 7, 0, 8, {1, 0, 0})}));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  f.engine.idle();
+  ASSERT_EQ(f.out.errors.size(), 1u);
+  EXPECT_EQ(f.out.errors[0].code, loopd::error_t::HELD_EXPIRED);
+  EXPECT_EQ(f.engine.counters().expired, 1);
+}
+
+TEST(Engine, RemovalsAndCommands) {
+  EngineFixture f;
+  std::int64_t seq = 0, id = 0;
+  chain(f, "r0", 0, 0, 6, seq, id);
+  f.send(batch("r0", ++seq, {between2(100, 0, 6, 0, 0, {0, 0, 0}, factor_t::ROLE_LOOP_CLOSURE)}));
+  const double withLoop = f.engine.backend().chi2();
+  factor_batch_t rm = batch("r0", ++seq, {});
+  rm.remove_ids = {100};
+  rm.num_remove_ids = 1;
+  f.send(rm);
+  EXPECT_LT(f.engine.backend().chi2(), withLoop);
+  EXPECT_TRUE(f.out.errors.empty());
+  f.send(rm);  // same sequence: duplicate, no error
+  rm.sequence = ++seq;
+  f.send(rm);  // removed already
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::UNKNOWN_FACTOR_ID);
+
+  f.command(command_t::REQUEST_COVARIANCE, "joint", {client::wireKey(KeyRef::pose(0, 1)), client::wireKey(KeyRef::pose(0, 2))});
+  f.command(command_t::REQUEST_COVARIANCE, "", {client::wireKey(KeyRef::pose(0, 99))});
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::UNKNOWN_KEY);
+  EXPECT_EQ(f.out.errors.back().request_id, 7);
+  f.command(command_t::SWITCH_SOLVER, "nope");
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::COMMAND_FAILED);
+  f.command(command_t::SWITCH_SOLVER, "gn");
+  EXPECT_EQ(f.engine.backend().name(), "gn");
+  EXPECT_EQ(f.poses(), 7);
+  const auto est = f.out.estimates.size();
+  f.command(command_t::REQUEST_ESTIMATE);
+  ASSERT_GT(f.out.estimates.size(), est);
+  EXPECT_TRUE(f.out.estimates.back().full_snapshot);
+  EXPECT_EQ(f.out.estimates.back().request_id, 7);
+  EXPECT_EQ(f.out.estimates.back().num_poses, 7);
+  const std::string snap = ::testing::TempDir() + "/snap.g2o";
+  f.command(command_t::SAVE_SNAPSHOT, snap);
+  std::ifstream in(snap);
+  std::string first;
+  std::getline(in, first);
+  EXPECT_EQ(first.rfind("VERTEX_SE2 0 ", 0), 0u) << first;
+  f.command(command_t::SAVE_SNAPSHOT, "/nonexistent/dir/x.g2o");
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::COMMAND_FAILED);
+  f.command(command_t::RESET);
+  EXPECT_EQ(f.poses(), 0);
+  // After RESET sequences restart.
+  f.send(batch("r0", 1, {between2(0, 0, 0, 0, 1, {1, 0, 0})}));
+  EXPECT_EQ(f.poses(), 2);
+}
+
+TEST(Engine, TwoRobotsJoinInOneFrame) {
+  EngineFixture f("isam2");
+  std::int64_t s0 = 0, s1 = 0, id0 = 0, id1 = 0;
+  chain(f, "a", 0, 0, 4, s0, id0);
+  chain(f, "b", 1, 10, 14, s1, id1);
+  EXPECT_FALSE(f.engine.robotJoined(0));
+  EXPECT_FALSE(f.engine.robotJoined(1));
+  // Robot 1's pose 10 is robot 0's pose 2 moved by (5, 0, 0).
+  f.send(batch("b", ++s1, {between2(id1++, 0, 2, 1, 10, {5, 0, 0}, factor_t::ROLE_LOOP_CLOSURE)}));
+  EXPECT_TRUE(f.engine.robotJoined(0));
+  EXPECT_TRUE(f.engine.robotJoined(1));
+  std::vector<double> a, b;
+  ASSERT_TRUE(f.engine.commonFramePose(poseKey(2, 0), a));
+  ASSERT_TRUE(f.engine.commonFramePose(poseKey(10, 1), b));
+  const SE2 rel = SE2(a[0], a[1], a[2]).between(SE2(b[0], b[1], b[2]));
+  EXPECT_NEAR(rel.x, 5, 1e-6);
+  EXPECT_NEAR(rel.y, 0, 1e-6);
+  EXPECT_NEAR(rel.theta, 0, 1e-6);
+  EXPECT_NEAR(f.engine.backend().chi2(), 0.0, 1e-6);
+  const auto& st = f.out.statuses.back();
+  EXPECT_EQ(st.robots, 2);
+  EXPECT_EQ(st.robots_in_common_frame, 2);
+  // The last estimates say common frame, robot 0's frame.
+  bool saw = false;
+  for (const auto& e : f.out.estimates)
+    if (e.robot == 1 && e.common_frame) {
+      saw = true;
+      EXPECT_EQ(e.frame_robot, 0);
+    }
+  EXPECT_TRUE(saw);
+  // Removing the only inter-robot factor re-roots robot 1 (the graph stays solvable).
+  factor_batch_t rm = batch("b", ++s1, {});
+  rm.remove_ids = {id1 - 1};
+  rm.num_remove_ids = 1;
+  f.send(rm);
+  EXPECT_TRUE(f.out.errors.empty());
+  chain(f, "b", 1, 14, 16, s1, id1);
+  EXPECT_TRUE(f.out.errors.empty());
+}
+
+TEST(Engine, MalformedBytesAreReported) {
+  EngineFixture f;
+  f.sendRaw({1, 2, 3});
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::DECODE_FAILED);
+  status_t s{};
+  s.solver = "x";
+  f.sendRaw(encode(s));
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::WRONG_FINGERPRINT);
+  EXPECT_NE(f.out.errors.back().reason.find("status_t"), std::string::npos);
+  auto good = encode(batch("r0", 1, {between2(0, 0, 0, 0, 1, {1, 0, 0})}));
+  good.resize(good.size() - 3);
+  f.sendRaw(good);
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::DECODE_FAILED);
+  f.sendRaw(std::vector<uint8_t>(300 * 1024, 0));
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::DECODE_FAILED);
+  EXPECT_EQ(f.poses(), 0);
+}
+
+TEST(ServerConfig, FlagsFileAndDefaults) {
+  const std::string path = ::testing::TempDir() + "/loopd.conf";
+  std::ofstream(path) << "# comment\nsolver = lm\npublish-every = 7\nchannel-prefix = X_\n";
+  ServerConfig c = parseServerConfig({"--config", path, "--publish-every", "9"});
+  EXPECT_EQ(c.solver, "lm");
+  EXPECT_EQ(c.publishEvery, 9);
+  EXPECT_EQ(c.channelPrefix, "X_");
+  EXPECT_EQ(parseServerConfig({}).solver, defaultSolver());
+  EXPECT_THROW(parseServerConfig({"--solver", "nope"}), std::invalid_argument);
+  EXPECT_THROW(parseServerConfig({"--bogus", "1"}), std::invalid_argument);
+  EXPECT_EQ(effectiveLcmUrl("udpm://239.255.76.67:7667?ttl=0"), "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304");
+  EXPECT_EQ(effectiveLcmUrl("memq://"), "memq://");
+}
+
+}  // namespace

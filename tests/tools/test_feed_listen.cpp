@@ -1,0 +1,115 @@
+// loopd-feed and loopd-listen as users run them: the log loopd-feed writes (senders, sequence
+// numbers, ids, roles, robots), its determinism, and loopd-listen's files against a live server.
+#include <lcm/lcm-cpp.hpp>
+
+#include <set>
+
+#include "loopd/factor_batch_t.hpp"
+#include "tests/server/live_util.h"
+
+using namespace loopd;
+using namespace loopd::testing_live;
+
+namespace {
+
+std::vector<factor_batch_t> readLog(const std::string& path) {
+  std::vector<factor_batch_t> out;
+  lcm::LogFile log(path, "r");
+  EXPECT_TRUE(log.good());
+  while (const lcm::LogEvent* ev = log.readNextEvent()) {
+    EXPECT_EQ(ev->channel, "LOOPD_FACTORS");
+    factor_batch_t b;
+    EXPECT_EQ(b.decode(ev->data, 0, ev->datalen), ev->datalen);
+    out.push_back(b);
+  }
+  return out;
+}
+
+TEST(LoopdFeed, LogHasOneBatchPerPoseNumberedPerSender) {
+  const std::string log = tmp("w100.lcmlog");
+  ASSERT_EQ(runTool({kFeed, kData + "/intel.g2o", "--robots", "3", "--log", log, "--quiet"}, tmp("feed.log")), 0);
+  const auto batches = readLog(log);
+  ASSERT_EQ(batches.size(), 1728u);
+  std::map<std::string, int64_t> lastSeq;
+  std::set<int64_t> ids;
+  int inter = 0, odometry = 0;
+  for (const auto& b : batches) {
+    EXPECT_EQ(b.sequence, ++lastSeq[b.sender]) << b.sender;
+    for (const auto& f : b.factors) {
+      EXPECT_TRUE(ids.insert(f.id).second) << "factor id " << f.id << " twice";
+      if (f.keys[0].robot != f.keys[1].robot) {
+        ++inter;
+        EXPECT_EQ(f.role, factor_t::ROLE_LOOP_CLOSURE);
+      }
+      odometry += f.role == factor_t::ROLE_ODOMETRY;
+      EXPECT_EQ(f.keys[0].robot, f.keys[0].index * 3 / 1728);  // consecutive segments, file ids
+    }
+  }
+  EXPECT_EQ(lastSeq.size(), 3u);
+  EXPECT_TRUE(lastSeq.count("feed0") && lastSeq.count("feed2"));
+  EXPECT_EQ(ids.size(), 2512u);  // every edge once, ids = edge indices
+  EXPECT_EQ(*ids.rbegin(), 2511);
+  EXPECT_GT(inter, 2);
+  EXPECT_EQ(odometry, 1727 - 2);  // the two segment boundaries are inter-robot closures
+  // Each robot's first pose comes with an initial value (its own frame's origin).
+  int initial = 0;
+  for (const auto& b : batches) initial += b.num_initial_values;
+  EXPECT_EQ(initial, 3);
+}
+
+TEST(LoopdFeed, DeterministicBatches) {
+  const std::string a = tmp("a.lcmlog"), b = tmp("b.lcmlog");
+  ASSERT_EQ(runTool({kFeed, kData + "/w100.graph", "--robots", "2", "--interleave", "--log", a, "--quiet"}, tmp("f1.log")), 0);
+  ASSERT_EQ(runTool({kFeed, kData + "/w100.graph", "--robots", "2", "--interleave", "--log", b, "--quiet"}, tmp("f2.log")), 0);
+  auto x = readLog(a), y = readLog(b);
+  ASSERT_EQ(x.size(), y.size());
+  for (size_t i = 0; i < x.size(); ++i) {
+    EXPECT_EQ(x[i].sender, y[i].sender);
+    EXPECT_EQ(x[i].sequence, y[i].sequence);
+    ASSERT_EQ(x[i].num_factors, y[i].num_factors);
+    for (int k = 0; k < x[i].num_factors; ++k) EXPECT_EQ(x[i].factors[k].id, y[i].factors[k].id);
+  }
+  // --interleave: robots alternate.
+  EXPECT_EQ(x[0].sender, "feed0");
+  EXPECT_EQ(x[1].sender, "feed1");
+}
+
+TEST(LoopdFeed, BadCommandLines) {
+  EXPECT_EQ(runTool({kFeed}, tmp("f.log")), 2);
+  EXPECT_EQ(runTool({kFeed, kData + "/intel.g2o", "--robots", "0"}, tmp("f.log")), 2);
+  EXPECT_EQ(runTool({kFeed, "/nonexistent.g2o", "--log", tmp("x.lcmlog")}, tmp("f.log")), 1);
+  EXPECT_EQ(runTool({kListen}, tmp("l.log")), 2);
+}
+
+TEST(LoopdListen, WritesEstimateAndCovariancesThenExitsWhenQuiet) {
+  const std::string url = uniqueUrl();
+  Proc srv = Proc::start({kLoopd, "--lcm-url", url}, tmp("srv.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  const std::string est = tmp("est.g2o"), cov = tmp("cov.txt");
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--covariances", cov, "--until-quiet", "1.5"},
+                            tmp("listen.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  ASSERT_EQ(runTool({kFeed, kData + "/intel.g2o", "--poses", "200", "--rate", "400", "--lcm-url", url, "--quiet"},
+                    tmp("feed.log")),
+            0);
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_EQ(listen.wait(30), 0) << listen.output();
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 10.0);
+  srv.kill(SIGINT);
+  EXPECT_EQ(srv.wait(20), 0);
+  const auto v = readVertices(est);
+  ASSERT_EQ(v.size(), 200u);
+  EXPECT_EQ(v.begin()->first, 0);
+  EXPECT_EQ(v.rbegin()->first, 199);
+  std::ifstream in(cov);
+  std::string line;
+  int poses = 0;
+  while (std::getline(in, line)) poses += line.rfind("POSE ", 0) == 0;
+  EXPECT_GT(poses, 10);  // the latest pose of many updates
+  // loopd-solve reads what loopd-listen wrote (as an initial estimate file).
+  std::ifstream e(est);
+  std::getline(e, line);
+  EXPECT_EQ(line.rfind("VERTEX_SE2 0 ", 0), 0u) << line;
+}
+
+}  // namespace

@@ -1,0 +1,234 @@
+// loopd-feed: play a dataset to a loopd server as one or many robots, live over LCM or into an
+// LCM log for lcm-logplayer.
+//
+//   loopd-feed DATASET [--robots N] [--rate HZ] [--lcm-url URL] [--sender NAME] [--log OUT.lcmlog]
+//              [--channel-prefix P] [--interleave] [--poses N] [--quiet]
+//
+// The poses (by file id) are cut into N consecutive segments, robot k owning segment k; a pose
+// keeps its file id as its index. Poses appear in id order (or, with --interleave, round-robin
+// over the robots); each appearing pose is one batch, from its robot's sender, carrying every
+// factor whose ends have all appeared (solvers/problem/incremental_schedule.h), factor ids =
+// file edge indices. Edges between consecutive ids of one robot are odometry; every other edge
+// (including those crossing segments) is a loop closure. A robot's first pose is sent with the
+// initial value identity (its own frame); the server composes the others from odometry.
+// The k-th batch of a sender has sequence k, so feeding the same file again is a resend.
+#include <lcm/lcm-cpp.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "client/factor_publisher.h"
+#include "solvers/io/dataset_reader.h"
+
+using namespace loopd;
+using client::KeyRef;
+
+namespace {
+
+struct Options {
+  std::string dataset, lcmUrl, sender = "feed", log, prefix = "LOOPD_";
+  int robots = 1;
+  double rate = 0.0;
+  bool interleave = false, quiet = false;
+  long poses = -1;
+};
+
+const char* kUsage =
+    "usage: loopd-feed DATASET [--robots N] [--rate HZ] [--lcm-url URL] [--sender NAME]\n"
+    "                  [--log OUT.lcmlog] [--channel-prefix P] [--interleave] [--poses N] [--quiet]\n"
+    "  --robots N        split the poses into N consecutive segments, one robot each (default 1)\n"
+    "  --rate HZ         poses per second (default 0 = as fast as possible)\n"
+    "  --sender NAME     sender names are NAME0, NAME1, ... (default feed)\n"
+    "  --log OUT         write an LCM log (replay with lcm-logplayer) instead of publishing\n"
+    "  --interleave      robots publish round-robin instead of one segment after the other\n"
+    "  --poses N         only the first N poses (and the edges among them)\n";
+
+Options parse(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto val = [&]() -> std::string {
+      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+      return argv[++i];
+    };
+    if (a == "--help" || a == "-h") {
+      std::fputs(kUsage, stdout);
+      std::exit(0);
+    } else if (a == "--robots") o.robots = std::stoi(val());
+    else if (a == "--rate") o.rate = std::stod(val());
+    else if (a == "--lcm-url") o.lcmUrl = val();
+    else if (a == "--sender") o.sender = val();
+    else if (a == "--log") o.log = val();
+    else if (a == "--channel-prefix") o.prefix = val();
+    else if (a == "--poses") o.poses = std::stol(val());
+    else if (a == "--interleave") o.interleave = true;
+    else if (a == "--quiet") o.quiet = true;
+    else if (a.rfind("--", 0) == 0) throw std::invalid_argument("unknown flag " + a);
+    else if (o.dataset.empty()) o.dataset = a;
+    else throw std::invalid_argument("unexpected argument " + a);
+  }
+  if (o.dataset.empty()) throw std::invalid_argument("no DATASET");
+  if (o.robots < 1 || o.robots > 1000) throw std::invalid_argument("--robots must be 1..1000");
+  if (o.rate < 0) throw std::invalid_argument("--rate must be >= 0");
+  return o;
+}
+
+int run(const Options& o) {
+  io::Dataset ds = io::readDataset(o.dataset);
+  std::vector<std::int64_t> ids;
+  for (const auto& v : ds.poses) ids.push_back(v.id);
+  std::sort(ids.begin(), ids.end());
+  if (o.poses >= 0 && static_cast<size_t>(o.poses) < ids.size()) ids.resize(static_cast<size_t>(o.poses));
+  if (ids.empty()) throw std::runtime_error("no poses in " + o.dataset);
+  const size_t n = ids.size();
+  const size_t robots = std::min<size_t>(static_cast<size_t>(o.robots), n);
+  // Robot of each pose: consecutive segments of the sorted ids.
+  std::map<std::int64_t, int> robotOf;
+  std::vector<std::vector<std::int64_t>> segment(robots);
+  for (size_t i = 0; i < n; ++i) {
+    const int r = static_cast<int>(i * robots / n);
+    robotOf[ids[i]] = r;
+    segment[static_cast<size_t>(r)].push_back(ids[i]);
+  }
+  // Order of appearance.
+  std::vector<std::int64_t> order;
+  if (!o.interleave) order = ids;
+  else
+    for (size_t k = 0; order.size() < n; ++k)
+      for (size_t r = 0; r < robots; ++r)
+        if (k < segment[r].size()) order.push_back(segment[r][k]);
+  std::map<std::int64_t, size_t> rank;
+  for (size_t i = 0; i < order.size(); ++i) rank[order[i]] = i;
+  // Each edge is due when its last pose appears.
+  std::vector<std::vector<const io::Edge*>> due(n);
+  size_t skipped = 0;
+  for (const auto& e : ds.edges) {
+    const bool landmarkEdge = e.type == io::EdgeType::PosePoint2 || e.type == io::EdgeType::PosePoint3 ||
+                              e.type == io::EdgeType::BearingRange2;
+    auto a = rank.find(e.from);
+    auto b = landmarkEdge ? a : rank.find(e.to);
+    if (a == rank.end() || b == rank.end()) {
+      ++skipped;
+      continue;
+    }
+    due[std::max(a->second, b->second)].push_back(&e);
+  }
+
+  // Where batches go.
+  std::unique_ptr<lcm::LCM> lcm;
+  std::unique_ptr<lcm::LogFile> log;
+  std::int64_t logTime = std::chrono::duration_cast<std::chrono::microseconds>(
+                             std::chrono::system_clock::now().time_since_epoch()).count();
+  std::int64_t events = 0;
+  client::BatchSink sink;
+  if (!o.log.empty()) {
+    log = std::make_unique<lcm::LogFile>(o.log, "w");
+    if (!log->good()) throw std::runtime_error("cannot write " + o.log);
+    sink = [&](const std::string& ch, const std::vector<std::uint8_t>& b) {
+      lcm::LogEvent ev;
+      ev.eventnum = events++;
+      ev.timestamp = logTime;
+      ev.channel = ch;
+      ev.datalen = static_cast<int32_t>(b.size());
+      ev.data = const_cast<std::uint8_t*>(b.data());
+      log->writeEvent(&ev);
+    };
+  } else {
+    lcm = std::make_unique<lcm::LCM>(o.lcmUrl);
+    if (!lcm->good()) throw std::runtime_error("cannot open LCM '" + o.lcmUrl + "'");
+    sink = [&](const std::string& ch, const std::vector<std::uint8_t>& b) {
+      lcm->publish(ch, b.data(), static_cast<unsigned>(b.size()));
+    };
+  }
+  std::vector<std::unique_ptr<client::FactorPublisher>> pubs;
+  for (size_t r = 0; r < robots; ++r)
+    pubs.push_back(std::make_unique<client::FactorPublisher>(sink, o.sender + std::to_string(r),
+                                                             o.prefix + "FACTORS"));
+  std::vector<bool> started(robots, false);
+
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::int64_t stepUs = o.rate > 0 ? static_cast<std::int64_t>(1e6 / o.rate) : 1000;
+  for (size_t i = 0; i < n; ++i) {
+    const std::int64_t id = order[i];
+    const int r = robotOf[id];
+    client::FactorPublisher& pub = *pubs[static_cast<size_t>(r)];
+    if (!started[static_cast<size_t>(r)]) {
+      started[static_cast<size_t>(r)] = true;
+      if (ds.is3d) pub.initialValue(KeyRef::pose(r, id), client::Pose3{});
+      else pub.initialValue(KeyRef::pose(r, id), client::Pose2{});
+    }
+    for (const io::Edge* e : due[i]) {
+      const int ra = robotOf[e->from];
+      const int d = io::edgeDimension(e->type);
+      const Eigen::MatrixXd info = e->information.topLeftCorner(d, d);
+      loopd::factor_t f{};
+      f.id = e->index;
+      f.noise_kind = loopd::factor_t::NOISE_INFORMATION;
+      f.noise = client::upperTriangle(info.data(), d);
+      f.num_noise = static_cast<std::int16_t>(f.noise.size());
+      f.measurement.assign(e->measurement.begin(), e->measurement.begin() + io::edgeMeasurementSize(e->type));
+      f.num_measurement = static_cast<std::int16_t>(f.measurement.size());
+      f.robust = "";
+      switch (e->type) {
+        case io::EdgeType::BetweenSE2:
+        case io::EdgeType::BetweenSE3: {
+          const int rb = robotOf[e->to];
+          f.type = e->type == io::EdgeType::BetweenSE2 ? loopd::factor_t::BETWEEN_SE2 : loopd::factor_t::BETWEEN_SE3;
+          const bool consecutive = ra == rb && (e->to == e->from + 1 || e->from == e->to + 1);
+          f.role = consecutive ? loopd::factor_t::ROLE_ODOMETRY : loopd::factor_t::ROLE_LOOP_CLOSURE;
+          f.keys = {client::wireKey(KeyRef::pose(ra, e->from)), client::wireKey(KeyRef::pose(rb, e->to))};
+          break;
+        }
+        case io::EdgeType::PosePoint2: f.type = loopd::factor_t::POSE_POINT2; break;
+        case io::EdgeType::PosePoint3: f.type = loopd::factor_t::POSE_POINT3; break;
+        case io::EdgeType::BearingRange2: f.type = loopd::factor_t::BEARING_RANGE2; break;
+      }
+      if (f.keys.empty()) {
+        f.role = loopd::factor_t::ROLE_LANDMARK;
+        f.keys = {client::wireKey(KeyRef::pose(ra, e->from)), client::wireKey(KeyRef::point(ra, e->to))};
+      }
+      f.num_keys = static_cast<std::int16_t>(f.keys.size());
+      pub.factor(f);
+    }
+    pub.flush();
+    logTime += stepUs;
+    if (lcm && o.rate > 0) {
+      const auto due = t0 + std::chrono::microseconds(static_cast<std::int64_t>((i + 1) * 1e6 / o.rate));
+      std::this_thread::sleep_until(due);
+    }
+    if (!o.quiet && (i + 1) % 1000 == 0)
+      std::fprintf(stderr, "loopd-feed: %zu/%zu poses\n", i + 1, n);
+  }
+  std::int64_t batches = 0;
+  for (auto& p : pubs) batches += p->batchesPublished();
+  if (!o.quiet)
+    std::fprintf(stderr, "loopd-feed: %zu poses, %zu robots, %lld batches%s in %.2f s%s\n", n, robots,
+                 static_cast<long long>(batches), o.log.empty() ? " published" : (" logged to " + o.log).c_str(),
+                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+                 skipped ? (", " + std::to_string(skipped) + " edges outside --poses skipped").c_str() : "");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  try {
+    o = parse(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "loopd-feed: %s\n\n%s", e.what(), kUsage);
+    return 2;
+  }
+  try {
+    return run(o);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "loopd-feed: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,173 @@
+// loopd-listen: record what a loopd server publishes into files loopd-solve and the evaluation
+// tools read.
+//
+//   loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o [--covariances COV.txt]
+//                [--until-quiet SECONDS] [--quiet]
+//
+// EST.g2o: one VERTEX_SE2 / VERTEX_SE3:QUAT line per pose (id = pose index, the value as
+// published: in the common frame once its robot is joined), then VERTEX_XY / VERTEX_TRACKXYZ
+// per landmark. COV.txt: the latest-pose covariances the server published, one line per pose
+// (`POSE id` then the upper triangle, loopd-solve's format). Without --until-quiet it records
+// until SIGINT/SIGTERM; with it, it exits once no new estimate arrived for that long (status
+// heartbeats do not count; the wait starts with the first estimate). At start it asks the
+// server for a full snapshot (REQUEST_ESTIMATE), so it may join a running server.
+#include <lcm/lcm-cpp.hpp>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <map>
+#include <string>
+
+#include "client/estimate_subscriber.h"
+#include "loopd/command_t.hpp"
+#include "solvers/io/estimate_writer.h"
+
+using namespace loopd;
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+extern "C" void onSignal(int) { g_stop = true; }
+
+const char* kUsage =
+    "usage: loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o [--covariances COV.txt]\n"
+    "                    [--until-quiet SECONDS] [--quiet]\n";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string url, prefix = "LOOPD_", out, cov;
+  double quietSeconds = -1.0;
+  bool quiet = false;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto val = [&]() -> std::string {
+        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--help" || a == "-h") {
+        std::fputs(kUsage, stdout);
+        return 0;
+      } else if (a == "--lcm-url") url = val();
+      else if (a == "--channel-prefix") prefix = val();
+      else if (a == "--out") out = val();
+      else if (a == "--covariances") cov = val();
+      else if (a == "--until-quiet") quietSeconds = std::stod(val());
+      else if (a == "--quiet") quiet = true;
+      else throw std::invalid_argument("unknown argument " + a);
+    }
+    if (out.empty()) throw std::invalid_argument("--out is required");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "loopd-listen: %s\n\n%s", e.what(), kUsage);
+    return 2;
+  }
+  url = client::receiveUrl(url);
+  lcm::LCM lcm(url);
+  if (!lcm.good()) {
+    std::fprintf(stderr, "loopd-listen: cannot open LCM '%s'\n", url.c_str());
+    return 1;
+  }
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+  client::EstimateSubscriber sub(lcm, prefix);
+  using Clock = std::chrono::steady_clock;
+  Clock::time_point lastEstimate{};
+  bool any = false;
+  std::map<std::int64_t, std::vector<double>> poseCov;  // pose index → upper triangle
+  sub.onEstimate([&](const client::RobotEstimate&, const loopd::estimate_t&) {
+    lastEstimate = Clock::now();
+    any = true;
+  });
+  sub.onCovariance([&](const loopd::covariance_t& m) {
+    if (m.joint) return;
+    size_t off = 0;
+    for (int i = 0; i < m.num_keys; ++i) {
+      const int d = m.dims[static_cast<size_t>(i)];
+      std::vector<double> up;
+      for (int r = 0; r < d; ++r)
+        for (int c = r; c < d; ++c) up.push_back(m.values[off + static_cast<size_t>(r * d + c)]);
+      if (m.keys[static_cast<size_t>(i)].kind == loopd::key_t::POSE) poseCov[m.keys[static_cast<size_t>(i)].index] = up;
+      off += static_cast<size_t>(d * d);
+    }
+  });
+  loopd::command_t req{};
+  req.utime = 0;
+  req.sender = "loopd-listen";
+  req.request_id = 1;
+  req.command = loopd::command_t::REQUEST_ESTIMATE;
+  req.argument = "";
+  req.num_keys = 0;
+  lcm.publish(prefix + "COMMAND", &req);
+
+  bool finalRequested = false;
+  while (!g_stop) {
+    lcm.handleTimeout(100);
+    const double wait = finalRequested ? std::min(quietSeconds, 1.0) : quietSeconds;
+    if (quietSeconds >= 0 && any && std::chrono::duration<double>(Clock::now() - lastEstimate).count() >= wait) {
+      if (finalRequested) break;
+      // Quiet: ask for one full snapshot (repairs any chunk udpm lost), then stop after it.
+      finalRequested = true;
+      req.request_id = 2;
+      lcm.publish(prefix + "COMMAND", &req);
+      lastEstimate = Clock::now();
+    }
+  }
+
+  io::Dataset ds;
+  ds.path = out;
+  for (const auto& [robot, t] : sub.all()) {
+    for (const auto& [index, x] : t.poses) {
+      io::Vertex v;
+      v.id = index;
+      v.type = t.se3 ? io::VertexType::SE3 : io::VertexType::SE2;
+      ds.is3d |= t.se3;
+      std::copy(x.begin(), x.end(), v.value.begin());
+      ds.poses.push_back(v);
+    }
+    for (const auto& [index, p] : t.landmarks) {
+      io::Vertex v;
+      v.id = index;
+      v.type = p.size() == 3 ? io::VertexType::Point3 : io::VertexType::Point2;
+      std::copy(p.begin(), p.end(), v.value.begin());
+      ds.landmarks.push_back(v);
+    }
+  }
+  std::sort(ds.poses.begin(), ds.poses.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
+  try {
+    io::writeG2oVertices(out, ds);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "loopd-listen: %s\n", e.what());
+    return 1;
+  }
+  if (!cov.empty()) {
+    FILE* f = std::fopen(cov.c_str(), "w");
+    if (!f) {
+      std::fprintf(stderr, "loopd-listen: cannot write %s\n", cov.c_str());
+      return 1;
+    }
+    std::fprintf(f, "# loopd marginal covariances (latest-pose covariances as published): KIND id, then the "
+                    "upper triangle (row-major) in tangent order\n");
+    for (const auto& [id, up] : poseCov) {
+      std::fprintf(f, "POSE %lld", static_cast<long long>(id));
+      for (double c : up) std::fprintf(f, " %.17g", c);
+      std::fputc('\n', f);
+    }
+    std::fclose(f);
+  }
+  if (!quiet) {
+    const auto st = sub.lastStatus();
+    int common = 0;
+    for (const auto& [r, t] : sub.all()) common += t.commonFrame ? 1 : 0;
+    std::fprintf(stderr, "loopd-listen: %zu poses, %zu landmarks written to %s (%lld estimate messages, %zu robots, "
+                         "%d in a common frame; server %s, chi2 %.12g, %lld batches accepted, %lld duplicate, "
+                         "%lld rejected)\n",
+                 ds.poses.size(), ds.landmarks.size(), out.c_str(), static_cast<long long>(sub.estimatesReceived()),
+                 sub.all().size(), common, st.solver.c_str(), st.chi2, static_cast<long long>(st.batches_accepted),
+                 static_cast<long long>(st.batches_duplicate), static_cast<long long>(st.batches_rejected));
+  }
+  return 0;
+}
