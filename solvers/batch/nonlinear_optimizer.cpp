@@ -81,11 +81,9 @@ void NonlinearOptimizer::report(int iteration, const LinearizationCost& cost, do
   options_.progress(r);
 }
 
-bool NonlinearOptimizer::stepIsNegligible(const Values& values,
-                                          const std::vector<double>& step) const {
+bool NonlinearOptimizer::stepIsNegligible(const std::vector<double>& step) const {
   double stepNorm2 = 0.0;
   for (double v : step) stepNorm2 += v * v;
-  (void)values;
   return std::sqrt(stepNorm2) < options_.stepTolerance * std::sqrt(step.size() + 1.0);
 }
 
@@ -127,6 +125,32 @@ namespace {
 bool costConverged(double before, double after, const OptimizerOptions& o) {
   const double decrease = before - after;
   return decrease <= o.absoluteTolerance || decrease <= o.relativeTolerance * before;
+}
+
+}  // namespace
+
+const char* NonlinearOptimizer::acceptStep(Values& values, const Values& trialValues,
+                                           const LinearizationCost& trialCost,
+                                           LinearizationCost& cost, std::vector<double>& step,
+                                           std::vector<double>& work) {
+  const double before = cost.weighted;
+  values.assignFrom(trialValues);
+  std::swap(current_, trial_);
+  cost = trialCost;
+  if (costConverged(before, cost.weighted, options_)) return "cost decrease below tolerance";
+  if (stepIsNegligible(step)) return "step below tolerance";
+  if (remainingDecreaseNegligible(cost.weighted, work, step))
+    return "expected decrease below tolerance";
+  return nullptr;
+}
+
+namespace {
+
+OptimizerResult& finish(OptimizerResult& result, const LinearizationCost& cost) {
+  if (result.stopReason.empty()) result.stopReason = "iteration limit";
+  result.finalChi2 = cost.chi2;
+  result.finalWeightedCost = cost.weighted;
+  return result;
 }
 
 }  // namespace
@@ -177,33 +201,26 @@ OptimizerResult NonlinearOptimizer::runLevenbergMarquardt(Values& values, const 
     const double rho = predicted > 0.0 ? actual / predicted : -1.0;
 
     if (rho > 1e-3 && std::isfinite(trialCost.weighted)) {
-      const double before = cost.weighted;
-      values.assignFrom(trialValues);
-      std::swap(current_, trial_);
-      cost = trialCost;
       lambda *= std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * rho - 1.0, 3));
       lambda = std::max(lambda, 1e-12);
       nu = 2.0;
+      const char* stop = acceptStep(values, trialValues, trialCost, cost, step, rhs);
       report(it, cost, lambda, true, secondsSince(t0));
-      if (costConverged(before, cost.weighted, options_)) {
+      if (stop) {
         result.converged = true;
-        result.stopReason = "cost decrease below tolerance";
-        break;
-      }
-      if (remainingDecreaseNegligible(cost.weighted, rhs, step)) {
-        result.converged = true;
-        result.stopReason = "expected decrease below tolerance";
-        break;
-      }
-      if (stepIsNegligible(values, step)) {
-        result.converged = true;
-        result.stopReason = "step below tolerance";
+        result.stopReason = stop;
         break;
       }
     } else {
       lambda *= nu;
       nu *= 2.0;
       report(it, cost, lambda, false, secondsSince(t0));
+      if (predicted >= 0.0 && predicted <= options_.relativeTolerance * cost.weighted) {
+        // Even the model promises nothing worth having: we are at the minimum to rounding.
+        result.converged = true;
+        result.stopReason = "predicted decrease below tolerance";
+        break;
+      }
       if (lambda > 1e32) {
         result.converged = true;  // no decrease possible: at a minimum to rounding
         result.stopReason = "no further decrease possible";
@@ -211,10 +228,7 @@ OptimizerResult NonlinearOptimizer::runLevenbergMarquardt(Values& values, const 
       }
     }
   }
-  if (result.stopReason.empty()) result.stopReason = "iteration limit";
-  result.finalChi2 = cost.chi2;
-  result.finalWeightedCost = cost.weighted;
-  return result;
+  return finish(result, cost);
 }
 
 OptimizerResult NonlinearOptimizer::runGaussNewton(Values& values, const double* weights) {
@@ -244,26 +258,15 @@ OptimizerResult NonlinearOptimizer::runGaussNewton(Values& values, const double*
       result.converged = cost.weighted - trialCost.weighted >= -1e-9 * cost.weighted;
       break;
     }
-    const double before = cost.weighted;
-    values.assignFrom(trialValues);
-    std::swap(current_, trial_);
-    cost = trialCost;
+    const char* stop = acceptStep(values, trialValues, trialCost, cost, step, rhs);
     report(it, cost, 0.0, true, secondsSince(t0));
-    if (costConverged(before, cost.weighted, options_) || stepIsNegligible(values, step)) {
+    if (stop) {
       result.converged = true;
-      result.stopReason = "cost decrease below tolerance";
-      break;
-    }
-    if (remainingDecreaseNegligible(cost.weighted, rhs, step)) {
-      result.converged = true;
-      result.stopReason = "expected decrease below tolerance";
+      result.stopReason = stop;
       break;
     }
   }
-  if (result.stopReason.empty()) result.stopReason = "iteration limit";
-  result.finalChi2 = cost.chi2;
-  result.finalWeightedCost = cost.weighted;
-  return result;
+  return finish(result, cost);
 }
 
 OptimizerResult NonlinearOptimizer::runDogleg(Values& values, const double* weights) {
@@ -326,15 +329,13 @@ OptimizerResult NonlinearOptimizer::runDogleg(Values& values, const double* weig
     if (rho < 0.25) radius = 0.5 * stepNorm;
 
     if (rho > 1e-3 && std::isfinite(trialCost.weighted)) {
-      const double before = cost.weighted;
-      values.assignFrom(trialValues);
-      std::swap(current_, trial_);
-      cost = trialCost;
+      // The last factorization is of H itself here, so the expected-decrease test is exact.
+      const char* stop = acceptStep(values, trialValues, trialCost, cost, step, rhs);
       haveSteps = false;
       report(it, cost, radius, true, secondsSince(t0));
-      if (costConverged(before, cost.weighted, options_) || stepIsNegligible(values, step)) {
+      if (stop) {
         result.converged = true;
-        result.stopReason = "cost decrease below tolerance";
+        result.stopReason = stop;
         break;
       }
     } else {
@@ -346,10 +347,7 @@ OptimizerResult NonlinearOptimizer::runDogleg(Values& values, const double* weig
       }
     }
   }
-  if (result.stopReason.empty()) result.stopReason = "iteration limit";
-  result.finalChi2 = cost.chi2;
-  result.finalWeightedCost = cost.weighted;
-  return result;
+  return finish(result, cost);
 }
 
 }  // namespace loopd

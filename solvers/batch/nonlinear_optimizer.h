@@ -74,7 +74,11 @@ class NonlinearOptimizer {
   OptimizerResult runDogleg(Values& values, const double* weights);
   bool remainingDecreaseNegligible(double cost, std::vector<double>& work,
                                    std::vector<double>& solution);
-  bool stepIsNegligible(const Values& values, const std::vector<double>& step) const;
+  bool stepIsNegligible(const std::vector<double>& step) const;
+  /// Moves to the trial point; returns why to stop (converged) or nullptr to go on.
+  const char* acceptStep(Values& values, const Values& trialValues,
+                         const LinearizationCost& trialCost, LinearizationCost& cost,
+                         std::vector<double>& step, std::vector<double>& work);
   void report(int iteration, const LinearizationCost& cost, double trust, bool accepted,
               double seconds) const;
 

@@ -115,9 +115,9 @@ LinearizationCost NormalEquations::build(const FactorGraph& graph, const Values&
   return cost;
 }
 
-LinearizationCost NormalEquations::cost(const FactorGraph& graph, const Values& values,
-                                        const double* weights) const {
-  LinearizationCost cost;
+template <typename PerFactor>
+void NormalEquations::forEachChi2(const FactorGraph& graph, const Values& values,
+                                  PerFactor&& perFactor) const {
   const double* x[kMaxFactorKeys];
   double r[kMaxResidualDim];
   for (int f = 0; f < graph.size(); ++f) {
@@ -126,25 +126,24 @@ LinearizationCost NormalEquations::cost(const FactorGraph& graph, const Values& 
     factor.evaluate(x, r, nullptr);
     double e2 = 0.0;
     for (int i = 0; i < factor.dim(); ++i) e2 += r[i] * r[i];
+    perFactor(f, e2);
+  }
+}
+
+LinearizationCost NormalEquations::cost(const FactorGraph& graph, const Values& values,
+                                        const double* weights) const {
+  LinearizationCost cost;
+  forEachChi2(graph, values, [&](int f, double e2) {
     cost.chi2 += e2;
     cost.weighted += (weights ? weights[f] : 1.0) * e2;
-  }
+  });
   return cost;
 }
 
 void NormalEquations::factorChi2(const FactorGraph& graph, const Values& values,
                                  std::vector<double>& out) const {
   out.resize(graph.size());
-  const double* x[kMaxFactorKeys];
-  double r[kMaxResidualDim];
-  for (int f = 0; f < graph.size(); ++f) {
-    const Factor& factor = *graph[f];
-    gatherInputs(layout_, factor, f, values, x);
-    factor.evaluate(x, r, nullptr);
-    double e2 = 0.0;
-    for (int i = 0; i < factor.dim(); ++i) e2 += r[i] * r[i];
-    out[f] = e2;
-  }
+  forEachChi2(graph, values, [&](int f, double e2) { out[f] = e2; });
 }
 
 }  // namespace loopd

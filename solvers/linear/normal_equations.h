@@ -33,6 +33,9 @@ class NormalEquations {
   void factorChi2(const FactorGraph& graph, const Values& values, std::vector<double>& out) const;
 
  private:
+  template <typename PerFactor>
+  void forEachChi2(const FactorGraph& graph, const Values& values, PerFactor&& perFactor) const;
+
   const HessianLayout& layout_;
   std::vector<double> hessian_;
   std::vector<double> gradient_;
