@@ -2,6 +2,9 @@
 
 #include <stdexcept>
 
+#include "robust/gnc_backend.h"
+#include "robust/risam_backend.h"
+#include "robust/robust_backend.h"
 #include "solvers/batch/batch_backend.h"
 #include "solvers/incremental/isam2.h"
 
@@ -19,6 +22,33 @@ std::unique_ptr<Backend> batch(OptimizerMethod m, BackendOptions o) {
   return std::make_unique<BatchBackend>(std::move(o));
 }
 
+// Robust decorators run over the incremental iSAM2 backend (the batch LM one if a build has
+// no "isam2" entry), checking relinearization at every update as riSAM forces it: robust
+// weights and switch/mixture choices only refresh when a factor is relinearized.
+std::unique_ptr<Backend> robustInner(const BackendOptions& o) {
+  if (isBackendName("isam2")) {
+    Isam2Options isam;
+    isam.relinearizeSkip = 1;
+    return std::make_unique<Isam2Backend>(o, isam);
+  }
+  return batch(OptimizerMethod::LevenbergMarquardt, o);
+}
+
+std::unique_ptr<Backend> decorated(const char* name, RobustMethod m, KernelType k,
+                                   const BackendOptions& o) {
+  RobustBackendOptions r;
+  r.method = m;
+  r.kernel = k;
+  r.parameter = o.robustParameter;
+  return std::make_unique<RobustBackend>(name, robustInner(o), r);
+}
+
+std::unique_ptr<Backend> gnc(GncLoss loss, const BackendOptions& o) {
+  GncOptions g;
+  g.loss = loss;
+  return std::make_unique<GncBackend>(o, g);
+}
+
 const std::vector<Entry>& registry() {
   static const std::vector<Entry> entries = {
       {{"lm", "batch Levenberg-Marquardt (default)", false},
@@ -29,6 +59,40 @@ const std::vector<Entry>& registry() {
        [](const BackendOptions& o) { return batch(OptimizerMethod::Dogleg, o); }},
       {{"isam2", "incremental Bayes tree (iSAM2): fluid relinearization, wildfire updates", true},
        [](const BackendOptions& o) { return std::make_unique<Isam2Backend>(o); }},
+      {{"huber", "Huber kernel (IRLS) on loop closures, over isam2; k = sqrt(chi2_dim(0.95))", true},
+       [](const BackendOptions& o) {
+         return decorated("huber", RobustMethod::Kernel, KernelType::Huber, o);
+       }},
+      {{"cauchy", "Cauchy kernel (IRLS) on loop closures, over isam2; k = sqrt(chi2_dim(0.95))", true},
+       [](const BackendOptions& o) {
+         return decorated("cauchy", RobustMethod::Kernel, KernelType::Cauchy, o);
+       }},
+      {{"gm", "Geman-McClure kernel (IRLS) on loop closures, over isam2; k = sqrt(chi2_dim(0.95))", true},
+       [](const BackendOptions& o) {
+         return decorated("gm", RobustMethod::Kernel, KernelType::GemanMcClure, o);
+       }},
+      {{"dcs", "dynamic covariance scaling (Agarwal 2013) over isam2; phi = 1", true},
+       [](const BackendOptions& o) {
+         return decorated("dcs", RobustMethod::Kernel, KernelType::DCS, o);
+       }},
+      {{"sc", "switchable constraints (Suenderhauf 2012) over isam2; switch prior 1, sigma 1", true},
+       [](const BackendOptions& o) {
+         return decorated("sc", RobustMethod::Switchable, KernelType::DCS, o);
+       }},
+      {{"mm", "max-mixtures (Olson 2013) over isam2; null weight 1e-7, sigma x1.6e7", true},
+       [](const BackendOptions& o) {
+         return decorated("mm", RobustMethod::MaxMixture, KernelType::DCS, o);
+       }},
+      {{"gnc-gm", "batch GNC, Geman-McClure (Yang 2020); cbar^2 = chi2_dim(0.99)", false},
+       [](const BackendOptions& o) { return gnc(GncLoss::GemanMcClure, o); }},
+      {{"gnc-tls", "batch GNC, truncated least squares (Yang 2020); cbar^2 = chi2_dim(0.99)", false},
+       [](const BackendOptions& o) { return gnc(GncLoss::TruncatedLeastSquares, o); }},
+      {{"risam", "incremental GNC in the riSAM manner (SIG kernel, c = sqrt(chi2_dim(0.95))) over isam2", true},
+       [](const BackendOptions& o) {
+         RisamOptions r;
+         if (o.robustParameter > 0.0) r.shape = o.robustParameter;
+         return std::make_unique<RisamBackend>(robustInner(o), r);
+       }},
   };
   return entries;
 }

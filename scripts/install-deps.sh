@@ -10,6 +10,7 @@ packages=(
   libspdlog-dev libgtest-dev
   libceres-dev          # optional comparison baseline for the benchmarks
   iproute2 procps
+  chromium              # loopd-view's end-to-end test drives it headless (tests/tools/test_loopd_view)
 )
 
 missing=()

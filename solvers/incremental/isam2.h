@@ -9,6 +9,7 @@
 // up. See ../shared/ISAM2_NOTES.md.
 #include <Eigen/Core>
 #include <array>
+#include <memory>
 #include <unordered_map>
 #include <vector>
 
@@ -18,7 +19,7 @@ namespace loopd {
 
 struct Isam2Options {
   double relinearizeThreshold = 0.1;  // β: max |Δ| component (rad or m) before relinearizing
-  int relinearizeSkip = 1;            // check for relinearization every k-th update
+  int relinearizeSkip = 10;           // check for relinearization every k-th update (GTSAM's default)
   double wildfireThreshold = 0.001;   // α: descend into a subtree if a separator Δ moved more
   double gaugeInformation = 1e8;      // internal prior on the first pose when no prior exists
   int maxFinalIterations = 30;        // optimize(): full relinearizations at most
@@ -56,10 +57,24 @@ class Isam2Backend : public Backend {
   const Isam2Options& isamOptions() const { return isam_; }
   bool hasGaugePrior() const { return gaugeFactor_ >= 0; }
   int cliqueCount() const { return static_cast<int>(cliques_.size() - freeCliques_.size()); }
-  /// Number of variables in the root clique holding key (0 if key is not in the tree).
+  /// True if key is a frontal variable of a root clique (where the newest pose should be).
   bool isInRootClique(Key key) const;
 
  private:
+  /// Uninitialised, reusable storage: the eliminator zeroes only what it accumulates into.
+  struct Buffer {
+    std::unique_ptr<double[]> p;
+    size_t capacity = 0;
+    double* data() { return p.get(); }
+    const double* data() const { return p.get(); }
+    void ensure(size_t n) {
+      if (n > capacity || 4 * n + 4096 < capacity) {
+        p.reset(new double[n]);
+        capacity = n;
+      }
+    }
+  };
+
   struct Clique {
     int parent = -1;
     std::vector<int> children;
@@ -71,7 +86,7 @@ class Isam2Backend : public Backend {
     // n×n column-major, then n entries: top-left L_FF (lower Cholesky factor of the frontal
     // block), bottom-left L_SF = H_SF·L_FF⁻ᵀ, bottom-right the separator factor's Hessian
     // (symmetric); vector: d = L_FF⁻¹·b_F, then the separator factor's b.
-    std::vector<double> m;
+    Buffer m;  // only the lower triangle of the symmetric parts is kept
     std::vector<double> marginal;  // n×n joint covariance of vars (cached per epoch)
     long marginalEpoch = -1;
     long topStamp = -1;
@@ -93,14 +108,12 @@ class Isam2Backend : public Backend {
   // --- elimination and solve
   /// Re-eliminates the top formed by affected_ (constrained_ ordered last).
   void recompute();
-  void orderTop(std::vector<int>& order);
-  void eliminateClique(int c, const std::vector<int>& homeFactorStart,
-                       const std::vector<int>& homeFactors, const std::vector<int>& framePos);
   bool factorizeClique(Clique& C);
   void linearizeInto(int factor, Clique& C);
   void accumulateChild(const Clique& child, Clique& C);
   void backSubstitute(std::vector<Key>* moved);
-  void solveClique(const Clique& C, std::vector<Key>* moved);
+  /// Solves C's frontal Δ; true if one moved by more than α.
+  bool solveClique(const Clique& C, std::vector<Key>* moved);
   double deltaMax(int v) const;
 
   // --- marginals

@@ -5,6 +5,10 @@
 // The separator is contained in the parent clique, so Σ_SS is a sub-block of the parent's
 // joint marginal: recursive from the root (where Σ = (RᵀR)⁻¹), cached per clique for the
 // current epoch (any update changes every marginal, so the epoch invalidates them all).
+// GCC 12 reports a false -Wmaybe-uninitialized inside Eigen's AVX-512 GEMM packing.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <stdexcept>
@@ -59,7 +63,7 @@ void Isam2Backend::computeCliqueMarginal(int c) {
     for (int v : P.vars) localIdx_[v] = -1;
     // A = R⁻¹·S = L_FF⁻ᵀ·L_SFᵀ
     Eigen::MatrixXd A = ConstMatMap(M + nf, ns, nf, Eigen::OuterStride<>(n)).transpose();
-    LFF.triangularView<Eigen::Lower>().transpose().solveInPlace(A);
+    LFF.transpose().triangularView<Eigen::Upper>().solveInPlace(A);
     S.topRightCorner(nf, ns).noalias() = -A * S.bottomRightCorner(ns, ns);
     S.topLeftCorner(nf, nf).noalias() -= S.topRightCorner(nf, ns) * A.transpose();
     S.bottomLeftCorner(ns, nf) = S.topRightCorner(nf, ns).transpose();
@@ -184,8 +188,8 @@ Eigen::MatrixXd Isam2Backend::marginalCovarianceByPathSolve(const std::vector<Ke
       xF.noalias() -= LSF.middleRows(o, d).transpose() * Y.middleRows(scratchPos_[C.vars[i]], d);
     }
     ConstMatMap(C.m.data(), nf, nf, Eigen::OuterStride<>(n))
-        .triangularView<Eigen::Lower>()
         .transpose()
+        .triangularView<Eigen::Upper>()
         .solveInPlace(xF);
   }
   Eigen::MatrixXd out(cols, cols);

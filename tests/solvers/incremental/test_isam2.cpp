@@ -2,6 +2,10 @@
 // factor equals never adding it; invalid updates change nothing; Bayes-tree marginals equal
 // the dense inverse of the information matrix (same gauge prior); Victoria Park covariances
 // are symmetric positive definite; the newest-pose fast path equals the general path.
+// GCC 12 reports a false -Wmaybe-uninitialized inside Eigen's AVX-512 kernels.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
@@ -121,7 +125,7 @@ TEST(Isam2, EqualsBatchOptimumOnIntelWithoutFinalOptimizeIsClose) {
 }
 
 TEST(Isam2, RemovingAFactorEqualsNeverAddingIt) {
-  const PoseGraphProblem p = prefix(load("intel.g2o"), 200);
+  const PoseGraphProblem p = prefix(load("manhattan.g2o"), 300);
   // Two loop closures: one removed mid-stream, one removed after the end.
   std::vector<FactorId> loops;
   for (const auto& f : p.graph.factors())

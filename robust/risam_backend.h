@@ -1,0 +1,77 @@
+#pragma once
+// riSAM-style incremental GNC (McGann, Rogers, Kaess, ICRA 2023) as a Backend decorator over
+// an incremental inner backend ("isam2"; "lm" works too, at batch cost).
+//
+// Trusted factors (priors, odometry) pass through and stay quadratic. Each uncertain factor
+// enters as a GraduatedFactor: riSAM's SIG kernel w = c²(c² + (χ²)^μ(1−μ))/(c² + (χ²)^μ)² at a
+// fixed μ, evaluated (IRLS) whenever the inner backend linearizes it. An update that brings
+// uncertain factors resets μ to μ_init for them and for the existing uncertain factors that
+// share a variable with them, then walks μ along the schedule
+//   μ ← min(1, μ + 1.2·(μ − μ_init + 0.1))       (0 → 0.12 → 0.384 → 0.965 → 1)
+// with one extra inner update per step. A step changes μ by removing each graduated factor
+// and re-adding it under a fresh internal id in the same inner update: that is what makes an
+// incremental inner backend relinearize it (a mutable weight would be ignored by cached
+// linearizations). Internal ids have the top bit set; original ids must stay below 2⁶³.
+// decisions(): SIG weight at the current estimate; rejected(): riSAM's benchmark rule, the
+// χ² test χ² > χ²_dim(0.95) at the current estimate (a weight threshold would depend on c).
+// Shape c: √χ²_dim(0.95) per factor dimension by default (2.80 for SE2, 3.55 for SE3; the
+// paper's c = 3 was for 2D), or BackendOptions::robustParameter for every factor.
+#include <memory>
+#include <unordered_map>
+
+#include "robust/robust_factors.h"
+#include "solvers/backend/backend.h"
+
+namespace loopd {
+
+struct RisamOptions {
+  double shape = 0.0;     // c; ≤ 0: √χ²_dim(0.95) (BackendOptions::robustParameter overrides)
+  double muInit = 0.0;
+  int extraIterations = 1;  // inner updates at μ = 1 after the schedule
+  bool graduateNeighbours = true;  // also reset uncertain factors sharing a variable
+  int neighbourWindow = 0;  // … or touching a variable within this many indices of one
+  double rejectChi2Probability = 0.95;  // rejected when χ² > χ²_dim(p)
+};
+
+class RisamBackend : public Backend {
+ public:
+  RisamBackend(std::unique_ptr<Backend> inner, RisamOptions options);
+
+  std::string name() const override { return "risam"; }
+  UpdateResult update(const BackendUpdate& update) override;
+  void optimize() override { inner_->optimize(); }
+  const Values& estimate() const override { return inner_->estimate(); }
+  const FactorGraph& graph() const override { return originals_; }
+  Eigen::MatrixXd marginalCovariance(const std::vector<Key>& keys) override {
+    return inner_->marginalCovariance(keys);
+  }
+  std::vector<Eigen::MatrixXd> marginals(const std::vector<Key>& keys) override {
+    return inner_->marginals(keys);
+  }
+  std::vector<std::pair<FactorId, double>> decisions() const override;
+  std::vector<FactorId> rejected() const override;
+  SolveSummary summary() const override { return inner_->summary(); }
+
+  /// Inner updates run by the last update() (1 + schedule steps when it graduated factors).
+  int lastInnerUpdates() const { return lastInnerUpdates_; }
+  static constexpr FactorId kInternalIdBit = FactorId{1} << 63;
+
+ private:
+  struct Graduated {
+    FactorPtr original;
+    std::shared_ptr<GraduatedFactor> wrapper;
+    FactorId internalId = 0;
+  };
+  double nextMu(double mu) const;
+  std::shared_ptr<GraduatedFactor> wrap(const FactorPtr& f, double mu, FactorId internal) const;
+
+  std::unique_ptr<Backend> inner_;
+  RisamOptions options_;
+  FactorGraph originals_;
+  std::unordered_map<FactorId, Graduated> graduated_;          // original id → state
+  std::unordered_map<Key, std::vector<FactorId>> byKey_;       // key → uncertain ids (lazy)
+  FactorId nextInternal_ = 0;
+  int lastInnerUpdates_ = 0;
+};
+
+}  // namespace loopd

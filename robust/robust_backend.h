@@ -1,0 +1,73 @@
+#pragma once
+// RobustBackend: a Backend decorator that makes any inner Backend (batch "lm", incremental
+// "isam2", …) robust by wrapping each incoming uncertain factor (role LoopClosure/Landmark)
+// in a robust factor; trusted factors (priors, odometry) pass through unchanged.
+//
+//   Kernel:      KernelFactor (Huber, Cauchy, Geman–McClure, DCS) — IRLS.
+//   Switchable:  SwitchableFactor + a switch variable s (Scalar, KeyKind::Switch, initial 1)
+//                + SwitchPriorFactor(γ = 1, σ = robustParameter or 1).
+//   MaxMixture:  MaxMixtureFactor (null weight 1e-7, null σ 1.6e7 relative to the inlier).
+//
+// The inner backend sees the wrapped factors under the same ids; switch priors get ids with
+// the top bit set (original ids must stay below 2⁶³). graph() returns the ORIGINAL factors, so
+// chi2() is Σ rᵀr of the input, unweighted. decisions()/rejected() are in original ids.
+#include <memory>
+#include <unordered_map>
+
+#include "robust/robust_factors.h"
+#include "solvers/backend/backend.h"
+
+namespace loopd {
+
+enum class RobustMethod { Kernel, Switchable, MaxMixture };
+
+struct RobustBackendOptions {
+  RobustMethod method = RobustMethod::Kernel;
+  KernelType kernel = KernelType::DCS;
+  /// Kernel: k (Huber/Cauchy/GM, on ‖r‖) or Φ (DCS); ≤ 0 → default.
+  /// Switchable: σ of the switch prior (default 1). MaxMixture: null weight (default 1e-7).
+  double parameter = 0.0;
+  double switchPrior = 1.0;      // γ
+  double nullSigma = 1.6e7;      // max-mixture null hypothesis: Σ₀ = σ₀²·Σ
+  double rejectBelow = 0.5;      // weight < this → rejected
+};
+
+class RobustBackend : public Backend {
+ public:
+  RobustBackend(std::string name, std::unique_ptr<Backend> inner, RobustBackendOptions options);
+
+  std::string name() const override { return name_; }
+  UpdateResult update(const BackendUpdate& update) override;
+  void optimize() override { inner_->optimize(); }
+  const Values& estimate() const override { return inner_->estimate(); }
+  const FactorGraph& graph() const override { return originals_; }
+  Eigen::MatrixXd marginalCovariance(const std::vector<Key>& keys) override {
+    return inner_->marginalCovariance(keys);
+  }
+  std::vector<Eigen::MatrixXd> marginals(const std::vector<Key>& keys) override {
+    return inner_->marginals(keys);
+  }
+  std::vector<std::pair<FactorId, double>> decisions() const override;
+  std::vector<FactorId> rejected() const override;
+  SolveSummary summary() const override { return inner_->summary(); }
+
+  const Backend& inner() const { return *inner_; }
+  /// The switch variable of an original factor (Switchable only), or 0.
+  Key switchOf(FactorId id) const;
+
+  static constexpr FactorId kInternalIdBit = FactorId{1} << 63;
+
+ private:
+  FactorPtr wrap(const FactorPtr& f, Key switchKey) const;
+  double weightOf(const Factor& wrapped) const;
+
+  std::string name_;
+  std::unique_ptr<Backend> inner_;
+  RobustBackendOptions options_;
+  FactorGraph originals_;
+  std::unordered_map<FactorId, FactorPtr> wrapped_;  // original id → wrapper (uncertain only)
+  std::unordered_map<FactorId, Key> switches_;       // original id → switch key
+  std::uint64_t nextSwitch_ = 0;
+};
+
+}  // namespace loopd

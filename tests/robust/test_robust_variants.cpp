@@ -1,0 +1,201 @@
+// Every robust variant on a real dataset with synthetic wrong loop closures from
+// loopd-outliers' generator: rejections (precision/recall) and the chi2 over the true edges
+// against the outlier-free optimum; with no outliers, every variant keeps (nearly)
+// everything and reaches the plain optimum.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdio>
+#include <map>
+#include <string>
+
+#include "robust/backend_registry.h"
+#include "solvers/io/dataset_reader.h"
+#include "solvers/problem/incremental_schedule.h"
+#include "solvers/problem/initial_guess.h"
+#include "solvers/problem/pose_graph_problem.h"
+#include "tools/loopd-eval/trajectory_metrics.h"
+#include "tools/loopd-outliers/outlier_generator.h"
+
+namespace loopd {
+namespace {
+
+using tools::OutlierMode;
+
+const std::string kDatasets = LOOPD_DATASETS_DIR;
+
+struct RunResult {
+  double inlierChi2 = 0.0;
+  tools::DecisionScores scores;
+  int rejected = 0;
+  double seconds = 0.0;
+};
+
+// Feeds the problem pose by pose (as loopd-solve --incremental does), or all at once.
+std::unique_ptr<Backend> solve(const std::string& variant, const PoseGraphProblem& p,
+                               bool incremental) {
+  auto b = makeBackend(variant);
+  if (!incremental) {
+    BackendUpdate all;
+    all.factors = p.graph.factors();
+    all.initial = p.initial;
+    b->update(all);
+    return b;
+  }
+  const auto steps = incrementalSchedule(p);
+  for (size_t i = 0; i < steps.size(); ++i) {
+    BackendUpdate u;
+    for (int f : steps[i].factors) u.factors.push_back(p.graph[f]);
+    if (!b->estimate().contains(steps[i].pose) && (i == 0 || u.factors.empty()))
+      u.initial.insertFrom(p.initial, p.initial.slot(steps[i].pose));
+    if (!predictMissingValues(u.factors, b->estimate(), u.initial))
+      throw std::runtime_error("cannot initialise pose");
+    b->update(u);
+  }
+  b->optimize();
+  return b;
+}
+
+bool isIncremental(const std::string& v) { return v != "gnc-gm" && v != "gnc-tls"; }
+
+RunResult run(const std::string& variant, const tools::OutlierResult& data) {
+  const PoseGraphProblem p = buildProblem(data.graph);
+  const auto t0 = std::chrono::steady_clock::now();
+  auto b = solve(variant, p, isIncremental(variant));
+  RunResult r;
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  for (const auto& f : p.graph.factors())
+    if (static_cast<int>(f->id()) < data.inlierEdges) r.inlierChi2 += f->chi2(b->estimate());
+  std::vector<std::int64_t> rejected, truth(data.outliers.begin(), data.outliers.end());
+  for (FactorId id : b->rejected()) rejected.push_back(static_cast<std::int64_t>(id));
+  r.rejected = static_cast<int>(rejected.size());
+  r.scores = tools::scoreRejections(rejected, truth);
+  return r;
+}
+
+struct Reference {
+  io::Dataset dataset;
+  double optimumChi2 = 0.0;
+};
+
+// "intel.g2o:600": the first 600 poses and the edges among them (keeps the suite fast).
+io::Dataset loadPrefix(const std::string& spec) {
+  const size_t colon = spec.find(':');
+  io::Dataset d = io::readDataset(kDatasets + "/" + spec.substr(0, colon));
+  if (colon == std::string::npos) return d;
+  const std::int64_t n = std::stoll(spec.substr(colon + 1));
+  std::vector<io::Vertex> poses;
+  for (const auto& v : d.poses)
+    if (v.id < n) poses.push_back(v);
+  std::vector<io::Edge> edges;
+  for (const auto& e : d.edges)
+    if (e.from < n && e.to < n) {
+      edges.push_back(e);
+      edges.back().index = static_cast<int>(edges.size()) - 1;
+    }
+  d.poses = std::move(poses);
+  d.edges = std::move(edges);
+  return d;
+}
+
+const Reference& reference(const std::string& file) {
+  static std::map<std::string, Reference> cache;
+  auto it = cache.find(file);
+  if (it != cache.end()) return it->second;
+  Reference r;
+  r.dataset = loadPrefix(file);
+  const PoseGraphProblem p = buildProblem(r.dataset);
+  auto b = solve("lm", p, false);
+  r.optimumChi2 = b->chi2();
+  return cache.emplace(file, std::move(r)).first->second;
+}
+
+struct Case {
+  std::string variant;
+  std::string dataset;
+  OutlierMode mode;
+  int count;
+  // Expectations (what holds for this variant and scenario).
+  double minRecall, minPrecision, chi2Tolerance;  // relative, over the true edges
+};
+
+std::string caseName(const Case& c) {
+  std::string n = c.variant + "_" + c.dataset.substr(0, c.dataset.find('.')) +
+                  (c.dataset.find(':') != std::string::npos ? "600" : "") + "_" +
+                  tools::outlierModeName(c.mode) + std::to_string(c.count);
+  for (char& ch : n)
+    if (!isalnum(static_cast<unsigned char>(ch))) ch = '_';
+  return n;
+}
+
+class RobustVariants : public ::testing::TestWithParam<Case> {};
+
+TEST_P(RobustVariants, RejectsOutliersAndReachesTheOptimum) {
+  const Case& c = GetParam();
+  const Reference& ref = reference(c.dataset);
+  tools::OutlierOptions o;
+  o.count = c.count;
+  o.mode = c.mode;
+  o.groupSize = 5;
+  o.seed = 42;
+  const tools::OutlierResult data = tools::addOutliers(ref.dataset, o);
+  const RunResult r = run(c.variant, data);
+  const double rel = (r.inlierChi2 - ref.optimumChi2) / ref.optimumChi2;
+  std::printf("[robust] %-8s %-16s %-7s %3d  recall %.3f precision %.3f rejected %3d  "
+              "chi2(true) %.6g vs %.6g (%+.4f%%)  %.2f s\n",
+              c.variant.c_str(), c.dataset.c_str(), tools::outlierModeName(c.mode), c.count,
+              r.scores.recall, r.scores.precision, r.rejected, r.inlierChi2, ref.optimumChi2,
+              100 * rel, r.seconds);
+  EXPECT_GE(r.scores.recall, c.minRecall);
+  EXPECT_GE(r.scores.precision, c.minPrecision);
+  EXPECT_LE(std::abs(rel), c.chi2Tolerance);
+}
+
+// Expectations are what each variant achieves (seed 42, groups of 5); kNone skips a bound.
+// Known failures are kept visible in the expectations rather than hidden:
+//  - groups of mutually consistent outliers defeat the batch GNCs and riSAM (accepted groups
+//    bend the map), while the incremental dcs/sc/mm reject each member as it arrives;
+//  - on smallGrid3D, whose edges carry their true noise (χ² ≈ dof per edge), DCS and SC with
+//    Φ = 1 / σ = 1 switch off almost every loop closure, and χ² tests reject a few true ones.
+constexpr double kNone = 1e300;
+
+std::vector<Case> cases() {
+  const char* intel = "intel.g2o:600";
+  const char* grid = "smallGrid3D.g2o";
+  const auto R = OutlierMode::Random, L = OutlierMode::Local, G = OutlierMode::Group;
+  return {
+      // zero outliers: nothing rejected, the plain optimum
+      {"gnc-tls", intel, R, 0, 1, 1, 0.01}, {"gnc-gm", intel, R, 0, 1, 1, 0.01},
+      {"risam", intel, R, 0, 1, 1, 0.01},   {"dcs", intel, R, 0, 1, 1, 0.01},
+      {"sc", intel, R, 0, 1, 1, 0.01},      {"mm", intel, R, 0, 1, 1, 0.01},
+      {"huber", intel, R, 0, 1, 1, 0.01},   {"cauchy", intel, R, 0, 1, 1, 0.01},
+      {"gm", intel, R, 0, 1, 1, 0.01},
+      // 30 random / local / grouped outliers
+      {"gnc-tls", intel, R, 30, 0.95, 0.95, 0.01}, {"gnc-tls", intel, L, 30, 0.95, 0.95, 0.01},
+      {"gnc-tls", intel, G, 30, 0.75, 0.95, kNone},
+      {"gnc-gm", intel, R, 30, 0.85, 0.95, kNone},  {"gnc-gm", intel, L, 30, 0.95, 0.95, kNone},
+      {"gnc-gm", intel, G, 30, 0.7, 0.75, kNone},
+      {"risam", intel, R, 30, 0.95, 0.95, 0.01},   {"risam", intel, L, 30, 0.95, 0.95, 0.01},
+      {"risam", intel, G, 30, 0.9, 0.5, kNone},
+      {"dcs", intel, R, 30, 0.95, 0.95, 0.01},     {"dcs", intel, L, 30, 0.95, 0.95, 0.01},
+      {"dcs", intel, G, 30, 0.95, 0.95, 0.01},
+      {"sc", intel, R, 30, 0.95, 0.95, 0.01},      {"sc", intel, L, 30, 0.95, 0.95, 0.01},
+      {"sc", intel, G, 30, 0.95, 0.95, 0.01},
+      {"mm", intel, R, 30, 0.95, 0.95, 0.01},      {"mm", intel, L, 30, 0.95, 0.95, kNone},
+      {"mm", intel, G, 30, 0.95, 0.95, 0.01},
+      // the whole of intel, random outliers, for the variants that handle them
+      {"gnc-tls", "intel.g2o", R, 30, 0.95, 0.95, 0.01},
+      {"dcs", "intel.g2o", R, 30, 0.95, 0.95, 0.01},
+      {"risam", "intel.g2o", R, 30, 0.95, 0.95, 0.01},
+      // 3D
+      {"gnc-tls", grid, R, 20, 0.95, 0.85, 0.10}, {"gnc-gm", grid, R, 20, 0.95, 0.35, 0.06},
+      {"risam", grid, R, 20, 0.95, 0.6, 0.2},     {"mm", grid, R, 20, 0.95, 0.95, 0.05},
+      {"dcs", grid, R, 20, 0.95, 0.0, kNone},     {"sc", grid, R, 20, 0.95, 0.0, kNone},
+  };
+}
+
+INSTANTIATE_TEST_SUITE_P(All, RobustVariants, ::testing::ValuesIn(cases()),
+                         [](const auto& info) { return caseName(info.param); });
+
+}  // namespace
+}  // namespace loopd

@@ -1,0 +1,92 @@
+// loopd-eval: score an estimate against a reference (ATE, RPE) and, with the truth of
+// loopd-outliers and a loopd-solve stats file, the solver's rejections.
+#include <cstdio>
+#include <iostream>
+#include <stdexcept>
+#include <string>
+
+#include "solvers/io/dataset_reader.h"
+#include "tools/common/json_writer.h"
+#include "tools/loopd-eval/trajectory_metrics.h"
+
+using namespace loopd;
+
+namespace {
+
+const char* kUsage =
+    "usage: loopd-eval --reference OPT.g2o --estimate EST.g2o [--truth TRUTH.json]\n"
+    "                  [--stats STATS.json] [--graph OUT.g2o] [--json OUT.json] [--quiet]\n\n"
+    "ATE: RMSE of positions after rigid Umeyama alignment of the estimate to the reference.\n"
+    "(Both are read for their vertex lines only.)\n"
+    "RPE: mean translation / rotation error of consecutive relative poses.\n"
+    "--truth + --stats: precision and recall of the stats' \"rejected\" against the truth's\n"
+    "\"outliers\". --graph (with --truth): chi2 of the estimate over the true edges only.\n";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string reference, estimate, truth, stats, graph, json;
+  bool quiet = false;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto value = [&]() -> std::string {
+        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--help" || a == "-h") {
+        std::cout << kUsage;
+        return 0;
+      } else if (a == "--reference") reference = value();
+      else if (a == "--estimate") estimate = value();
+      else if (a == "--truth") truth = value();
+      else if (a == "--stats") stats = value();
+      else if (a == "--graph") graph = value();
+      else if (a == "--json") json = value();
+      else if (a == "--quiet" || a == "-q") quiet = true;
+      else throw std::invalid_argument("unknown argument " + a);
+    }
+    if (reference.empty() || estimate.empty())
+      throw std::invalid_argument("--reference and --estimate are required");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "loopd-eval: %s\n\n%s", e.what(), kUsage);
+    return 2;
+  }
+  try {
+    const io::Dataset ref = tools::readVertices(reference);
+    const io::Dataset est = tools::readVertices(estimate);
+    const tools::TrajectoryErrors t = tools::trajectoryErrors(ref, est);
+    tools::JsonObject out;
+    out.add("reference", reference).add("estimate", estimate).add("poses", t.poses)
+        .add("ate_rmse", t.ateRmse).add("ate_max", t.ateMax).add("rpe_trans", t.rpeTrans)
+        .add("rpe_rot_deg", t.rpeRotDeg);
+    std::printf("poses %d  ATE rmse %.6g m (max %.6g)  RPE %.6g m / %.6g deg\n", t.poses,
+                t.ateRmse, t.ateMax, t.rpeTrans, t.rpeRotDeg);
+    std::vector<std::int64_t> outliers;
+    if (!truth.empty()) outliers = tools::jsonIntArray(tools::readTextFile(truth), "outliers");
+    if (!truth.empty() && !stats.empty()) {
+      const auto rejected = tools::jsonIntArray(tools::readTextFile(stats), "rejected");
+      const tools::DecisionScores s = tools::scoreRejections(rejected, outliers);
+      std::printf("outliers %zu  rejected %zu  TP %d FP %d FN %d  precision %.4f  recall %.4f\n",
+                  outliers.size(), rejected.size(), s.truePositives, s.falsePositives,
+                  s.falseNegatives, s.precision, s.recall);
+      out.add("outliers", static_cast<std::int64_t>(outliers.size()))
+          .add("rejected", static_cast<std::int64_t>(rejected.size()))
+          .add("true_positives", s.truePositives).add("false_positives", s.falsePositives)
+          .add("false_negatives", s.falseNegatives).add("precision", s.precision)
+          .add("recall", s.recall);
+    }
+    if (!graph.empty()) {
+      const io::Dataset g = io::readDataset(graph);
+      const double c = tools::inlierChi2(g, est, outliers);
+      std::printf("chi2 over true edges %.9g\n", c);
+      out.add("inlier_chi2", c);
+    }
+    if (!json.empty()) out.writeFile(json);
+    (void)quiet;
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "loopd-eval: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,176 @@
+#include "tools/loopd-outliers/outlier_generator.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <stdexcept>
+
+#include "tools/common/json_writer.h"
+
+namespace loopd::tools {
+
+namespace {
+
+class Rng {
+ public:
+  explicit Rng(std::uint64_t seed) : g_(seed) {}
+  double uniform() { return static_cast<double>(g_() >> 11) * (1.0 / 9007199254740992.0); }
+  double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
+  // Integer in [lo, hi].
+  std::int64_t integer(std::int64_t lo, std::int64_t hi) {
+    if (hi <= lo) return lo;
+    const std::uint64_t span = static_cast<std::uint64_t>(hi - lo) + 1;
+    return lo + static_cast<std::int64_t>(g_() % span);
+  }
+  double normal() {
+    const double u1 = std::max(uniform(), 1e-300), u2 = uniform();
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
+  }
+
+ private:
+  std::mt19937_64 g_;
+};
+
+bool isBetween(const io::Edge& e) {
+  return e.type == io::EdgeType::BetweenSE2 || e.type == io::EdgeType::BetweenSE3;
+}
+bool isLoop(const io::Edge& e) { return isBetween(e) && std::llabs(e.to - e.from) != 1; }
+
+double translationNorm(const io::Edge& e) {
+  if (e.type == io::EdgeType::BetweenSE2) return std::hypot(e.measurement[0], e.measurement[1]);
+  return std::sqrt(e.measurement[0] * e.measurement[0] + e.measurement[1] * e.measurement[1] +
+                   e.measurement[2] * e.measurement[2]);
+}
+
+template <class T>
+T median(std::vector<T> v) {
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+const char* outlierModeName(OutlierMode m) {
+  switch (m) {
+    case OutlierMode::Random: return "random";
+    case OutlierMode::Local: return "local";
+    case OutlierMode::Group: return "group";
+  }
+  return "?";
+}
+
+OutlierMode outlierModeFromName(const std::string& n) {
+  if (n == "random") return OutlierMode::Random;
+  if (n == "local") return OutlierMode::Local;
+  if (n == "group") return OutlierMode::Group;
+  throw std::invalid_argument("--mode takes random, local or group, got '" + n + "'");
+}
+
+OutlierResult addOutliers(const io::Dataset& input, const OutlierOptions& opt) {
+  if (opt.count < 0) throw std::invalid_argument("outlier count must be >= 0");
+  if (opt.groupSize < 1) throw std::invalid_argument("group size must be >= 1");
+  if (opt.localWindow < 2) throw std::invalid_argument("local window must be >= 2");
+  std::vector<std::int64_t> ids;
+  for (const auto& v : input.poses) ids.push_back(v.id);
+  std::sort(ids.begin(), ids.end());
+  const std::int64_t n = static_cast<std::int64_t>(ids.size());
+  const int groupSize = opt.mode == OutlierMode::Group ? opt.groupSize : 1;
+  if (n < groupSize + 3) throw std::invalid_argument("too few poses for outliers");
+
+  // The dataset's loop-closure scale and information.
+  std::vector<const io::Edge*> loops, betweens;
+  for (const auto& e : input.edges) {
+    if (isBetween(e)) betweens.push_back(&e);
+    if (isLoop(e)) loops.push_back(&e);
+  }
+  const std::vector<const io::Edge*>& ref = loops.empty() ? betweens : loops;
+  if (ref.empty()) throw std::invalid_argument("dataset has no between edges");
+  const bool is3d = ref.front()->type == io::EdgeType::BetweenSE3;
+  const int dim = is3d ? 6 : 3;
+  std::vector<double> lengths;
+  std::vector<std::pair<double, const io::Edge*>> traces;
+  for (const io::Edge* e : ref) {
+    lengths.push_back(translationNorm(*e));
+    traces.emplace_back(e->information.topLeftCorner(dim, dim).trace(), e);
+  }
+  double L = median(lengths);
+  if (!(L > 1e-6)) {
+    lengths.clear();
+    for (const io::Edge* e : betweens) lengths.push_back(translationNorm(*e));
+    L = std::max(1.0, median(lengths));
+  }
+  std::sort(traces.begin(), traces.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  const Eigen::Matrix<double, 6, 6> information = traces[traces.size() / 2].second->information;
+
+  OutlierResult out;
+  out.graph = input;
+  out.inlierEdges = static_cast<int>(input.edges.size());
+  Rng rng(opt.seed);
+  const std::int64_t span = groupSize - 1;  // the group's last pair is (a + span, b + span)
+  int made = 0;
+  while (made < opt.count) {
+    std::int64_t a, b;
+    const bool local = opt.mode == OutlierMode::Local ||
+                       (opt.mode == OutlierMode::Group && opt.localGroups);
+    if (local) {
+      a = rng.integer(0, n - 3 - span);
+      b = a + rng.integer(2, opt.localWindow);
+      if (b + span > n - 1) b = n - 1 - span;
+      if (b < a + 2) continue;
+    } else {
+      a = rng.integer(0, n - 3 - span);
+      b = rng.integer(a + 2, n - 1 - span);
+    }
+    // One measurement for the whole group.
+    std::array<double, 7> m{};
+    const double len = rng.uniform(0.0, L);
+    if (!is3d) {
+      const double dir = rng.uniform(-M_PI, M_PI);
+      m[0] = len * std::cos(dir);
+      m[1] = len * std::sin(dir);
+      m[2] = rng.uniform(-M_PI, M_PI);
+    } else {
+      Eigen::Vector3d d(rng.normal(), rng.normal(), rng.normal());
+      if (d.norm() < 1e-12) d = Eigen::Vector3d::UnitX();
+      d = d.normalized() * len;
+      Eigen::Vector4d q(rng.normal(), rng.normal(), rng.normal(), rng.normal());
+      if (q.norm() < 1e-12) q = Eigen::Vector4d(0, 0, 0, 1);
+      q.normalize();
+      if (q[3] < 0) q = -q;
+      m = {d.x(), d.y(), d.z(), q[0], q[1], q[2], q[3]};
+    }
+    const int k = std::min(groupSize, opt.count - made);
+    for (int j = 0; j < k; ++j) {
+      io::Edge e;
+      e.type = is3d ? io::EdgeType::BetweenSE3 : io::EdgeType::BetweenSE2;
+      e.from = ids[a + j];
+      e.to = ids[b + j];
+      e.measurement = m;
+      e.information = information;
+      e.line = 0;
+      e.index = static_cast<int>(out.graph.edges.size());
+      out.outliers.push_back(e.index);
+      out.graph.edges.push_back(e);
+      ++made;
+    }
+  }
+  return out;
+}
+
+std::string outlierTruthJson(const std::string& inputPath, const OutlierOptions& opt,
+                             const OutlierResult& r) {
+  std::vector<std::int64_t> outliers(r.outliers.begin(), r.outliers.end());
+  JsonObject o;
+  o.add("input", inputPath)
+      .add("mode", outlierModeName(opt.mode))
+      .add("count", opt.count)
+      .add("seed", static_cast<std::int64_t>(opt.seed))
+      .add("group_size", opt.mode == OutlierMode::Group ? opt.groupSize : 1)
+      .add("outliers", outliers)
+      .add("inlier_edges", r.inlierEdges);
+  return o.str();
+}
+
+}  // namespace loopd::tools

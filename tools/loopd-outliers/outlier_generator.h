@@ -1,0 +1,53 @@
+#pragma once
+// Synthetic wrong loop closures after Vertigo's generateDataset.py protocol (Sünderhauf &
+// Protzel), for benchmarks and tests. Outliers are appended after the dataset's own edges,
+// so their 0-based edge indices are inlierEdges … inlierEdges + count − 1.
+//
+//   random: a < b uniform over the poses (b ≥ a + 2, never an odometry pair)
+//   local:  a uniform, b ∈ [a + 2, a + window]
+//   group:  groups of K edges (a + j, b + j), j = 0…K−1, all with the SAME measurement
+//           (mutually consistent); (a, b) random, or local with localGroups
+// Measurement: rotation uniform (2D: θ ∈ [−π, π); 3D: uniform unit quaternion), translation
+// direction uniform and length uniform in [0, L], L = the median translation of the dataset's
+// loop closures (of all between edges if it has none). Information: that of the dataset's
+// loop closure with the median trace (or of its median-trace between edge).
+// Deterministic for a seed (own uniform draws on std::mt19937_64, no library distributions).
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "solvers/io/dataset.h"
+
+namespace loopd::tools {
+
+enum class OutlierMode { Random, Local, Group };
+
+struct OutlierOptions {
+  int count = 100;
+  OutlierMode mode = OutlierMode::Random;
+  int groupSize = 10;
+  int localWindow = 50;
+  bool localGroups = false;  // group mode: place groups like local outliers
+  std::uint64_t seed = 1;
+};
+
+struct OutlierResult {
+  io::Dataset graph;          // input edges, then the outliers
+  std::vector<int> outliers;  // 0-based edge indices of the added edges in graph
+  int inlierEdges = 0;        // number of original edges
+};
+
+const char* outlierModeName(OutlierMode m);
+/// "random", "local", "group"; throws std::invalid_argument otherwise.
+OutlierMode outlierModeFromName(const std::string& name);
+
+/// Throws std::invalid_argument for a dataset with fewer than 4 poses, landmark-only data, or
+/// bad options.
+OutlierResult addOutliers(const io::Dataset& input, const OutlierOptions& options);
+
+/// TRUTH.json: {"input", "mode", "count", "seed", "group_size", "outliers": [...],
+/// "inlier_edges"}.
+std::string outlierTruthJson(const std::string& inputPath, const OutlierOptions& options,
+                             const OutlierResult& result);
+
+}  // namespace loopd::tools
