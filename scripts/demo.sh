@@ -3,7 +3,8 @@
 #   a loopd server on a private udpm URL (ttl=0), loopd-listen recording what it publishes, and a
 #   two-robot stream of manhattan (with 20 random wrong loop closures when loopd-outliers is
 #   built, solved by a robust variant) replayed into it by lcm-logplayer; then a summary and a
-#   clean SIGINT stop. Outputs in build/demo/. Unattended; about a minute after the build.
+#   clean SIGINT stop, with loopd-view serving the live map at the printed URL meanwhile.
+#   Outputs in build/demo/. Unattended; about a minute after the build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [[ $(id -u) -eq 0 ]]; then bash scripts/install-deps.sh; fi
@@ -65,12 +66,19 @@ grep -q "loopd: solver" "$out/loopd.log" || { echo "demo: loopd did not start" >
   --covariances "$out/covariances.txt" --until-quiet 8 >"$out/listen.log" 2>&1 &
 listen_pid=$!
 
-# HOOK(loopd-view): start the web view here once it exists, e.g.
-#   VIEW_CMD=("$bin/tools/loopd-view" --lcm-url "$url" --port 8080)
-#   "${VIEW_CMD[@]}" >"$out/view.log" 2>&1 & view_pid=$!
-#   echo "== live view: http://localhost:8080/"
-VIEW_CMD=()
-if [[ ${#VIEW_CMD[@]} -gt 0 ]]; then "${VIEW_CMD[@]}" >"$out/view.log" 2>&1 & view_pid=$!; fi
+# --- the live view: open the printed URL in a browser ---------------------------------------
+# LOOPD_VIEW_PORT picks the port (default 8080, or any free one if 8080 is taken);
+# LOOPD_DEMO_KEEP=1 keeps server and view running after the replay until Ctrl-C.
+view_port=${LOOPD_VIEW_PORT:-8080}
+for port in "$view_port" 0; do
+  "$bin/tools/loopd-view/loopd-view" --lcm-url "$url" --port "$port" >"$out/view.log" 2>&1 &
+  view_pid=$!
+  for _ in $(seq 30); do grep -q "http://" "$out/view.log" 2>/dev/null && break; sleep 0.1; done
+  if kill -0 "$view_pid" 2>/dev/null && grep -q "http://" "$out/view.log"; then break; fi
+  view_pid=""
+done
+view_url=$(grep -o "http://[^ ]*" "$out/view.log" | head -1 || true)
+echo "== live view of the map: ${view_url:-not available (see $out/view.log)}"
 sleep 1
 
 # --- replay ---------------------------------------------------------------------------------
@@ -85,6 +93,11 @@ for _ in $(seq 900); do kill -0 "$listen_pid" 2>/dev/null || break; sleep 0.1; d
 if kill -0 "$listen_pid" 2>/dev/null; then kill -INT "$listen_pid"; fi
 wait "$listen_pid" || true; listen_pid=""
 
+if [[ ${LOOPD_DEMO_KEEP:-0} == 1 ]]; then
+  echo "== server and view keep running (${view_url:-no view}); Ctrl-C to stop"
+  wait "$server_pid" || true
+fi
+
 # --- stop the server cleanly (SIGINT: finishes the update, flushes the journal) -----------
 kill -INT "$server_pid"
 wait "$server_pid" || { echo "demo: loopd exited with an error" >&2; exit 1; }
@@ -97,7 +110,7 @@ poses=$(sed -n 's/^loopd-listen: \([0-9]*\) poses.*/\1/p' <<<"$summary")
 chi2=$(sed -n 's/.*chi2 \([^,]*\),.*/\1/p' <<<"$summary")
 echo
 echo "== loopd demo: $(basename "$input"), 2 robots, solver $solver"
-echo "   poses estimated: ${poses:-?}   chi2: ${chi2:-?}"
+echo "   poses estimated: ${poses:-?}   chi2: ${chi2:-?}   view: ${view_url:-none}"
 echo "   listener: ${summary#loopd-listen: }"
 echo "   server:   ${stopped:-?}"
 echo "   outputs:  $out/estimate.g2o (estimate, g2o vertices)  $out/covariances.txt (latest-pose covariances)"
