@@ -25,6 +25,13 @@ def reference_table(path):
     return ref
 
 
+def report_misses(misses):
+    """Print the missed targets, if any; returns the exit code (1 if any were missed, else 0)."""
+    if misses:
+        print('\nmissed targets:\n' + '\n'.join('- ' + m for m in misses))
+    return 1 if misses else 0
+
+
 def run_loopd(exe, path, repeat):
     best = None
     for _ in range(repeat):
@@ -91,9 +98,7 @@ def main():
               f"{mine['final_chi2']:.6f} | {fmt(best, '{}')} | {'yes' if ok else 'NO'} | "
               f"{mine['solve_s']:.4f} | {ceres_cell} | {fmt(r_ceres, '{:.2f}')} | {fmt(gtsam, '{}')} | "
               f"{fmt(r_gtsam, '{:.2f}')} |")
-    if failures:
-        print('\nmissed targets:\n' + '\n'.join('- ' + f for f in failures))
-    return 1 if failures else 0
+    return report_misses(failures)
 
 
 if __name__ == '__main__':

@@ -7,7 +7,7 @@ of ../shared/REFERENCE.md; then a scaling table on synthetic Manhattan worlds (l
 """
 import argparse, json, os, re, subprocess, sys, tempfile
 
-from batch_bench import ROOT, reference_table
+from batch_bench import ROOT, reference_table, report_misses
 
 TARGETS = ['manhattan', 'city10000', 'sphere2500', 'torus3D', 'parking-garage']
 
@@ -80,9 +80,7 @@ def main():
                 st = solve(exe, world)
             print(f"| {n} | {closures} | {st['solve_s']:.2f} | {st['update_ms_mean']:.3f} | "
                   f"{st['update_ms_p99']:.2f} | {st['update_ms_max']:.1f} |")
-    if misses:
-        print('\nmissed targets:\n' + '\n'.join('- ' + m for m in misses))
-    return 1 if misses else 0
+    return report_misses(misses)
 
 
 if __name__ == '__main__':

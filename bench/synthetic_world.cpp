@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "solvers/geometry/se2.h"
+#include "tools/common/cli.h"
 
 using loopd::SE2;
 
@@ -32,10 +33,7 @@ Options parse(int argc, char** argv) {
   Options o;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-      return argv[++i];
-    };
+    auto next = [&] { return loopd::tools::flagValue(argc, argv, i); };
     if (a == "--poses") o.poses = std::stol(next());
     else if (a == "--out") o.out = next();
     else if (a == "--seed") o.seed = static_cast<unsigned>(std::stoul(next()));

@@ -8,9 +8,7 @@
 namespace loopd {
 
 RisamBackend::RisamBackend(std::unique_ptr<Backend> inner, RisamOptions options)
-    : inner_(std::move(inner)), options_(options) {
-  if (!inner_) throw std::invalid_argument("RisamBackend: null inner backend");
-}
+    : DecoratorBackend(std::move(inner), "RisamBackend"), options_(options) {}
 
 double RisamBackend::nextMu(double mu) const {
   return std::min(1.0, mu + 1.2 * (mu - options_.muInit + 0.1));
@@ -93,14 +91,8 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
 
   // Commit the bookkeeping.
   nextInternal_ = nextInternal;
-  if (!removing.empty()) {
-    FactorGraph kept;
-    for (const auto& f : originals_.factors())
-      if (!removing.count(f->id())) kept.add(f);
-    originals_ = std::move(kept);
-    for (FactorId id : u.removals) graduated_.erase(id);
-  }
-  for (const auto& f : u.factors) originals_.add(f);
+  commitOriginals(u, removing);
+  for (FactorId id : u.removals) graduated_.erase(id);
   for (size_t a = 0; a < active.size(); ++a) {
     const bool isNew = graduated_.find(activeIds[a]) == graduated_.end();
     graduated_[activeIds[a]] = active[a];

@@ -19,8 +19,8 @@
 #include <memory>
 #include <unordered_map>
 
+#include "robust/decorator_backend.h"
 #include "robust/robust_factors.h"
-#include "solvers/backend/backend.h"
 
 namespace loopd {
 
@@ -33,24 +33,14 @@ struct RisamOptions {
   double rejectChi2Probability = 0.95;  // rejected when χ² > χ²_dim(p)
 };
 
-class RisamBackend : public Backend {
+class RisamBackend : public DecoratorBackend {
  public:
   RisamBackend(std::unique_ptr<Backend> inner, RisamOptions options);
 
   std::string name() const override { return "risam"; }
   UpdateResult update(const BackendUpdate& update) override;
-  void optimize() override { inner_->optimize(); }
-  const Values& estimate() const override { return inner_->estimate(); }
-  const FactorGraph& graph() const override { return originals_; }
-  Eigen::MatrixXd marginalCovariance(const std::vector<Key>& keys) override {
-    return inner_->marginalCovariance(keys);
-  }
-  std::vector<Eigen::MatrixXd> marginals(const std::vector<Key>& keys) override {
-    return inner_->marginals(keys);
-  }
   std::vector<std::pair<FactorId, double>> decisions() const override;
   std::vector<FactorId> rejected() const override;
-  SolveSummary summary() const override { return inner_->summary(); }
 
   /// Inner updates run by the last update() (1 + schedule steps when it graduated factors).
   int lastInnerUpdates() const { return lastInnerUpdates_; }
@@ -65,9 +55,7 @@ class RisamBackend : public Backend {
   double nextMu(double mu) const;
   std::shared_ptr<GraduatedFactor> wrap(const FactorPtr& f, double mu, FactorId internal) const;
 
-  std::unique_ptr<Backend> inner_;
   RisamOptions options_;
-  FactorGraph originals_;
   std::unordered_map<FactorId, Graduated> graduated_;          // original id → state
   std::unordered_map<Key, std::vector<FactorId>> byKey_;       // key → uncertain ids (lazy)
   FactorId nextInternal_ = 0;

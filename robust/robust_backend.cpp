@@ -8,9 +8,7 @@ namespace loopd {
 
 RobustBackend::RobustBackend(std::string name, std::unique_ptr<Backend> inner,
                              RobustBackendOptions options)
-    : name_(std::move(name)), inner_(std::move(inner)), options_(options) {
-  if (!inner_) throw std::invalid_argument("RobustBackend: null inner backend");
-}
+    : DecoratorBackend(std::move(inner), "RobustBackend"), name_(std::move(name)), options_(options) {}
 
 FactorPtr RobustBackend::wrap(const FactorPtr& f, Key switchKey) const {
   switch (options_.method) {
@@ -68,14 +66,8 @@ UpdateResult RobustBackend::update(const BackendUpdate& u) {
   // Commit the bookkeeping only once the inner backend accepted the update. Switch priors
   // stay when their factor is removed, so the switch variable stays determined.
   nextSwitch_ = nextSwitch;
-  if (!removing.empty()) {
-    FactorGraph kept;
-    for (const auto& f : originals_.factors())
-      if (!removing.count(f->id())) kept.add(f);
-    originals_ = std::move(kept);
-    for (FactorId id : u.removals) wrapped_.erase(id);
-  }
-  for (const auto& f : u.factors) originals_.add(f);
+  commitOriginals(u, removing);
+  for (FactorId id : u.removals) wrapped_.erase(id);
   for (auto& [id, w] : newWrapped) wrapped_[id] = w;
   for (auto& [id, s] : newSwitches) switches_[id] = s;
   return result;

@@ -14,8 +14,8 @@
 #include <memory>
 #include <unordered_map>
 
+#include "robust/decorator_backend.h"
 #include "robust/robust_factors.h"
-#include "solvers/backend/backend.h"
 
 namespace loopd {
 
@@ -32,24 +32,14 @@ struct RobustBackendOptions {
   double rejectBelow = 0.5;      // weight < this → rejected
 };
 
-class RobustBackend : public Backend {
+class RobustBackend : public DecoratorBackend {
  public:
   RobustBackend(std::string name, std::unique_ptr<Backend> inner, RobustBackendOptions options);
 
   std::string name() const override { return name_; }
   UpdateResult update(const BackendUpdate& update) override;
-  void optimize() override { inner_->optimize(); }
-  const Values& estimate() const override { return inner_->estimate(); }
-  const FactorGraph& graph() const override { return originals_; }
-  Eigen::MatrixXd marginalCovariance(const std::vector<Key>& keys) override {
-    return inner_->marginalCovariance(keys);
-  }
-  std::vector<Eigen::MatrixXd> marginals(const std::vector<Key>& keys) override {
-    return inner_->marginals(keys);
-  }
   std::vector<std::pair<FactorId, double>> decisions() const override;
   std::vector<FactorId> rejected() const override;
-  SolveSummary summary() const override { return inner_->summary(); }
 
   const Backend& inner() const { return *inner_; }
   /// The switch variable of an original factor (Switchable only), or 0.
@@ -62,9 +52,7 @@ class RobustBackend : public Backend {
   double weightOf(const Factor& wrapped) const;
 
   std::string name_;
-  std::unique_ptr<Backend> inner_;
   RobustBackendOptions options_;
-  FactorGraph originals_;
   std::unordered_map<FactorId, FactorPtr> wrapped_;  // original id → wrapper (uncertain only)
   std::unordered_map<FactorId, Key> switches_;       // original id → switch key
   std::uint64_t nextSwitch_ = 0;

@@ -2,6 +2,30 @@
 
 namespace loopd::server {
 
+namespace {
+// Evaluates inner (a between factor of dimension D) at the common-frame poses p = A_r·x_r,
+// q = A_s·x_s and chains its Jacobians onto (A_r, x_r, A_s, x_s): ∂e/∂δA = ∂e/∂δP·Ad(x⁻¹),
+// ∂e/∂δx = ∂e/∂δP. adjointR() / adjointS() give Ad(x_r⁻¹) / Ad(x_s⁻¹), only when needed.
+template <int D, class Inner, class AdjointR, class AdjointS>
+void evaluateAnchored(const Inner& inner, const double* p, const double* q, double* r,
+                      double* const* J, AdjointR adjointR, AdjointS adjointS) {
+  using MatD = Eigen::Matrix<double, D, D>;
+  const double* pq[2] = {p, q};
+  if (J == nullptr) {
+    inner.evaluate(pq, r, nullptr);
+    return;
+  }
+  JacobianBlock jp{}, jq{};
+  double* jpq[2] = {jp.data(), jq.data()};
+  inner.evaluate(pq, r, jpq);
+  const Eigen::Map<const MatD> JP(jp.data()), JQ(jq.data());
+  if (J[0]) { Eigen::Map<MatD> out(J[0]); out = JP * adjointR(); }
+  if (J[1]) { Eigen::Map<MatD> out(J[1]); out = JP; }
+  if (J[2]) { Eigen::Map<MatD> out(J[2]); out = JQ * adjointS(); }
+  if (J[3]) { Eigen::Map<MatD> out(J[3]); out = JQ; }
+}
+}  // namespace
+
 Eigen::Matrix3d adjointSE2(const SE2& X) {
   Eigen::Matrix3d A = Eigen::Matrix3d::Identity();
   A.topLeftCorner<2, 2>() = X.R();
@@ -25,19 +49,9 @@ void AnchoredBetweenFactorSE2::evaluate(const double* const* x, double* r,
   const SE2 as(x[2][0], x[2][1], x[2][2]), xs(x[3][0], x[3][1], x[3][2]);
   const SE2 P = ar * xr, Q = as * xs;
   const double p[3] = {P.x, P.y, P.theta}, q[3] = {Q.x, Q.y, Q.theta};
-  const double* pq[2] = {p, q};
-  if (J == nullptr) {
-    inner_.evaluate(pq, r, nullptr);
-    return;
-  }
-  JacobianBlock jp{}, jq{};
-  double* jpq[2] = {jp.data(), jq.data()};
-  inner_.evaluate(pq, r, jpq);
-  const Eigen::Map<const Eigen::Matrix3d> JP(jp.data()), JQ(jq.data());
-  if (J[0]) { Eigen::Map<Eigen::Matrix3d> out(J[0]); out = JP * adjointSE2(xr.inverse()); }
-  if (J[1]) { Eigen::Map<Eigen::Matrix3d> out(J[1]); out = JP; }
-  if (J[2]) { Eigen::Map<Eigen::Matrix3d> out(J[2]); out = JQ * adjointSE2(xs.inverse()); }
-  if (J[3]) { Eigen::Map<Eigen::Matrix3d> out(J[3]); out = JQ; }
+  evaluateAnchored<3>(
+      inner_, p, q, r, J, [&] { return adjointSE2(xr.inverse()); },
+      [&] { return adjointSE2(xs.inverse()); });
 }
 
 std::unique_ptr<Factor> AnchoredBetweenFactorSE2::clone() const {
@@ -70,19 +84,9 @@ void AnchoredBetweenFactorSE3::evaluate(const double* const* x, double* r,
   double p[kValueStride], q[kValueStride];
   store(ar * xr, p);
   store(as * xs, q);
-  const double* pq[2] = {p, q};
-  if (J == nullptr) {
-    inner_.evaluate(pq, r, nullptr);
-    return;
-  }
-  JacobianBlock jp{}, jq{};
-  double* jpq[2] = {jp.data(), jq.data()};
-  inner_.evaluate(pq, r, jpq);
-  const Eigen::Map<const Mat6> JP(jp.data()), JQ(jq.data());
-  if (J[0]) { Eigen::Map<Mat6> out(J[0]); out = JP * xr.inverse().adjoint(); }
-  if (J[1]) { Eigen::Map<Mat6> out(J[1]); out = JP; }
-  if (J[2]) { Eigen::Map<Mat6> out(J[2]); out = JQ * xs.inverse().adjoint(); }
-  if (J[3]) { Eigen::Map<Mat6> out(J[3]); out = JQ; }
+  evaluateAnchored<6>(
+      inner_, p, q, r, J, [&] { return xr.inverse().adjoint(); },
+      [&] { return xs.inverse().adjoint(); });
 }
 
 std::unique_ptr<Factor> AnchoredBetweenFactorSE3::clone() const {

@@ -266,20 +266,8 @@ int run(const Args& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  Args a;
-  try {
-    a = parseArgs(argc, argv,
-                  {"mode", "dataset", "rate", "poses", "robots", "solver", "lcm-url", "server", "server-arg",
-                   "channel-prefix", "drain-seconds", "offline-solve", "json", "csv", "warmup", "label"},
-                  {"connect", "no-offline"}, kUsage);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s\n\n%s", e.what(), kUsage);
-    return 2;
-  }
-  try {
-    return run(a);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "bench: %s\n", e.what());
-    return 1;
-  }
+  return benchMain(argc, argv,
+                   {"mode", "dataset", "rate", "poses", "robots", "solver", "lcm-url", "server", "server-arg",
+                    "channel-prefix", "drain-seconds", "offline-solve", "json", "csv", "warmup", "label"},
+                   {"connect", "no-offline"}, kUsage, "bench", run);
 }

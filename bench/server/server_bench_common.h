@@ -508,4 +508,25 @@ inline Args parseArgs(int argc, char** argv, const std::vector<std::string>& kno
   return a;
 }
 
+/// main() of a benchmark: run(parseArgs(...)). A parse error prints the message, a blank line
+/// and the usage to stderr and returns 2; a run error prints "TAG: message" to stderr and
+/// returns 1; otherwise run's result.
+inline int benchMain(int argc, char** argv, const std::vector<std::string>& known,
+                     const std::vector<std::string>& switches, const char* usage, const char* tag,
+                     int (*run)(const Args&)) {
+  Args a;
+  try {
+    a = parseArgs(argc, argv, known, switches, usage);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s\n\n%s", e.what(), usage);
+    return 2;
+  }
+  try {
+    return run(a);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", tag, e.what());
+    return 1;
+  }
+}
+
 }  // namespace loopd::bench

@@ -240,20 +240,8 @@ int run(const Args& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  Args a;
-  try {
-    a = parseArgs(argc, argv,
-                  {"minutes", "robots", "rate", "dataset", "poses", "lap-mode", "sample-seconds", "solver", "lcm-url",
-                   "server", "server-arg", "csv", "json"},
-                  {}, kUsage);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s\n\n%s", e.what(), kUsage);
-    return 2;
-  }
-  try {
-    return run(a);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "soak: %s\n", e.what());
-    return 1;
-  }
+  return benchMain(argc, argv,
+                   {"minutes", "robots", "rate", "dataset", "poses", "lap-mode", "sample-seconds", "solver", "lcm-url",
+                    "server", "server-arg", "csv", "json"},
+                   {}, kUsage, "soak", run);
 }

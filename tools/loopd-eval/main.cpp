@@ -6,6 +6,7 @@
 #include <string>
 
 #include "solvers/io/dataset_reader.h"
+#include "tools/common/cli.h"
 #include "tools/common/json_writer.h"
 #include "tools/loopd-eval/trajectory_metrics.h"
 
@@ -30,10 +31,7 @@ int main(int argc, char** argv) {
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
-      auto value = [&]() -> std::string {
-        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-        return argv[++i];
-      };
+      auto value = [&] { return tools::flagValue(argc, argv, i); };
       if (a == "--help" || a == "-h") {
         std::cout << kUsage;
         return 0;

@@ -25,6 +25,7 @@
 
 #include "client/factor_publisher.h"
 #include "solvers/io/dataset_reader.h"
+#include "tools/common/cli.h"
 
 using namespace loopd;
 using client::KeyRef;
@@ -53,10 +54,7 @@ Options parse(int argc, char** argv) {
   Options o;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto val = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-      return argv[++i];
-    };
+    auto val = [&] { return tools::flagValue(argc, argv, i); };
     if (a == "--help" || a == "-h") {
       std::fputs(kUsage, stdout);
       std::exit(0);
@@ -217,18 +215,4 @@ int run(const Options& o) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  Options o;
-  try {
-    o = parse(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "loopd-feed: %s\n\n%s", e.what(), kUsage);
-    return 2;
-  }
-  try {
-    return run(o);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "loopd-feed: %s\n", e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return tools::parseAndRun("loopd-feed", kUsage, argc, argv, parse, run); }

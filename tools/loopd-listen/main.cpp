@@ -24,6 +24,7 @@
 #include "client/estimate_subscriber.h"
 #include "loopd/command_t.hpp"
 #include "solvers/io/estimate_writer.h"
+#include "tools/common/cli.h"
 
 using namespace loopd;
 
@@ -45,10 +46,7 @@ int main(int argc, char** argv) {
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
-      auto val = [&]() -> std::string {
-        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-        return argv[++i];
-      };
+      auto val = [&] { return tools::flagValue(argc, argv, i); };
       if (a == "--help" || a == "-h") {
         std::fputs(kUsage, stdout);
         return 0;

@@ -20,6 +20,7 @@
 #include <thread>
 
 #include "client/estimate_subscriber.h"
+#include "tools/common/cli.h"
 #include "tools/loopd-view/http_server.h"
 #include "tools/loopd-view/view_state.h"
 
@@ -27,6 +28,15 @@ namespace {
 
 std::atomic<bool> gStop{false};
 void onSignal(int) { gStop = true; }
+
+void installSignalHandlers() {
+  struct sigaction sa {};
+  sa.sa_handler = onSignal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+  signal(SIGPIPE, SIG_IGN);
+}
 
 struct Options {
   std::string lcmUrl, prefix = "LOOPD_", bind = "127.0.0.1";
@@ -51,10 +61,7 @@ Options parse(int argc, char** argv) {
   Options o;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto val = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-      return argv[++i];
-    };
+    auto val = [&] { return loopd::tools::flagValue(argc, argv, i); };
     auto integer = [&](const std::string& v, long lo, long hi) {
       char* end = nullptr;
       const long n = std::strtol(v.c_str(), &end, 10);
@@ -136,23 +143,8 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  Options o;
-  try {
-    o = parse(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "loopd-view: %s\n\n%s", e.what(), kUsage);
-    return 2;
-  }
-  struct sigaction sa {};
-  sa.sa_handler = onSignal;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
-  signal(SIGPIPE, SIG_IGN);
-  try {
+  return loopd::tools::parseAndRun("loopd-view", kUsage, argc, argv, parse, [](const Options& o) {
+    installSignalHandlers();
     return run(o);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "loopd-view: %s\n", e.what());
-    return 1;
-  }
+  });
 }
