@@ -92,10 +92,17 @@ int run(const tools::SolveOptions& opt) {
         .add("stop_reason", summary.stopReason)
         .add("incremental", opt.incremental);
     if (opt.incremental) {
-      stats.add("updates", online.updates)
-          .add("update_ms_mean", online.meanMs)
-          .add("update_ms_p99", online.p99Ms)
-          .add("update_ms_max", online.maxMs);
+      stats.add("updates", online.all.count)
+          .add("update_ms_mean", online.all.meanMs)
+          .add("update_ms_p99", online.all.p99Ms)
+          .add("update_ms_max", online.all.maxMs)
+          .add("exploration_updates", online.exploration.count)
+          .add("exploration_update_ms_mean", online.exploration.meanMs)
+          .add("exploration_update_ms_max", online.exploration.maxMs)
+          .add("closure_updates", online.closures.count)
+          .add("closure_update_ms_mean", online.closures.meanMs)
+          .add("closure_update_ms_p99", online.closures.p99Ms)
+          .add("closure_update_ms_max", online.closures.maxMs);
     }
     stats.add("rejected", rejected).add("peak_rss_mb", tools::peakRssMb());
     stats.writeFile(opt.stats);

@@ -11,9 +11,33 @@
 
 namespace loopd::tools {
 
+namespace {
+
+UpdateTimes summarize(std::vector<double> ms) {
+  UpdateTimes t;
+  t.count = static_cast<int>(ms.size());
+  if (ms.empty()) return t;
+  double sum = 0.0;
+  for (double v : ms) sum += v;
+  t.meanMs = sum / ms.size();
+  t.maxMs = *std::max_element(ms.begin(), ms.end());
+  const size_t k = std::min(ms.size() - 1, static_cast<size_t>(std::ceil(0.99 * ms.size())) - 1);
+  std::nth_element(ms.begin(), ms.begin() + k, ms.end());
+  t.p99Ms = ms[k];
+  return t;
+}
+
+bool carriesLoopClosure(const BackendUpdate& u) {
+  for (const auto& f : u.factors)
+    if (f->role() == FactorRole::LoopClosure) return true;
+  return false;
+}
+
+}  // namespace
+
 OnlineRunStats runOnline(Backend& backend, const PoseGraphProblem& problem, bool quiet) {
   const std::vector<IncrementalStep> steps = incrementalSchedule(problem);
-  std::vector<double> ms;
+  std::vector<double> ms, explorationMs, closureMs;
   ms.reserve(steps.size());
   const auto start = std::chrono::steady_clock::now();
   for (size_t i = 0; i < steps.size(); ++i) {
@@ -33,6 +57,7 @@ OnlineRunStats runOnline(Backend& backend, const PoseGraphProblem& problem, bool
     backend.update(u);
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                      .count());
+    (carriesLoopClosure(u) ? closureMs : explorationMs).push_back(ms.back());
     if (!quiet && (i + 1) % 1000 == 0)
       std::fprintf(stderr, "  update %zu/%zu  last %.2f ms  elapsed %.1f s\n", i + 1,
                    steps.size(), ms.back(),
@@ -41,16 +66,9 @@ OnlineRunStats runOnline(Backend& backend, const PoseGraphProblem& problem, bool
   backend.optimize();
 
   OnlineRunStats s;
-  s.updates = static_cast<int>(ms.size());
-  if (ms.empty()) return s;
-  double sum = 0.0;
-  for (double v : ms) sum += v;
-  s.meanMs = sum / ms.size();
-  s.maxMs = *std::max_element(ms.begin(), ms.end());
-  std::vector<double> sorted = ms;
-  const size_t k = std::min(sorted.size() - 1, static_cast<size_t>(std::ceil(0.99 * sorted.size())) - 1);
-  std::nth_element(sorted.begin(), sorted.begin() + k, sorted.end());
-  s.p99Ms = sorted[k];
+  s.all = summarize(ms);
+  s.exploration = summarize(std::move(explorationMs));
+  s.closures = summarize(std::move(closureMs));
   return s;
 }
 

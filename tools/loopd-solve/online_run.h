@@ -5,9 +5,15 @@
 
 namespace loopd::tools {
 
-struct OnlineRunStats {
-  int updates = 0;
+struct UpdateTimes {
+  int count = 0;
   double meanMs = 0.0, p99Ms = 0.0, maxMs = 0.0;
+};
+
+struct OnlineRunStats {
+  UpdateTimes all;
+  UpdateTimes exploration;  // updates that carry no loop closure
+  UpdateTimes closures;     // updates that carry at least one
 };
 
 /// One update per pose (incrementalSchedule); new variables are initialised by composing
