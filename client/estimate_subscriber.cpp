@@ -1,4 +1,5 @@
 #include "client/estimate_subscriber.h"
+#include "lcmtypes/lcm_url.h"
 
 #include <lcm/lcm-cpp.hpp>
 
@@ -6,16 +7,7 @@
 
 namespace loopd::client {
 
-std::string receiveUrl(const std::string& url) {
-  std::string u = url;
-  if (u.empty()) {
-    const char* env = std::getenv("LCM_DEFAULT_URL");
-    u = env && *env ? env : "udpm://239.255.76.67:7667?ttl=0";
-  }
-  if (u.rfind("udpm://", 0) == 0 && u.find("recv_buf_size") == std::string::npos)
-    u += (u.find('?') == std::string::npos ? "?" : "&") + std::string("recv_buf_size=4194304");
-  return u;
-}
+std::string receiveUrl(const std::string& url) { return lcmReceiveUrl(url); }
 
 EstimateSubscriber::EstimateSubscriber(lcm::LCM& lcm, const std::string& p) : lcm_(lcm) {
   auto keep = [&](lcm::Subscription* s) {

@@ -1,4 +1,5 @@
 #include "server/server_config.h"
+#include "lcmtypes/lcm_url.h"
 
 #include <cstdlib>
 #include <fstream>
@@ -121,16 +122,7 @@ ServerConfig parseServerConfig(const std::vector<std::string>& args) {
   return c;
 }
 
-std::string effectiveLcmUrl(const std::string& url) {
-  std::string u = url;
-  if (u.empty()) {
-    const char* env = std::getenv("LCM_DEFAULT_URL");
-    u = env && *env ? env : "udpm://239.255.76.67:7667?ttl=0";
-  }
-  if (u.rfind("udpm://", 0) == 0 && u.find("recv_buf_size") == std::string::npos)
-    u += (u.find('?') == std::string::npos ? "?" : "&") + std::string("recv_buf_size=4194304");
-  return u;
-}
+std::string effectiveLcmUrl(const std::string& url) { return lcmReceiveUrl(url); }
 
 std::string serverUsage() {
   return "usage: loopd [flags]\n"
