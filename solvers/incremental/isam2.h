@@ -8,6 +8,7 @@
 // partial Cholesky gives the conditional (L_FF, L_SF, d) and the separator factor it passes
 // up. See ../shared/ISAM2_NOTES.md.
 #include <Eigen/Core>
+#include <algorithm>
 #include <array>
 #include <memory>
 #include <unordered_map>
@@ -65,6 +66,20 @@ class Isam2Backend : public Backend {
   struct Buffer {
     std::unique_ptr<double[]> p;
     size_t capacity = 0;
+    Buffer() = default;
+    Buffer(Buffer&&) noexcept = default;
+    Buffer& operator=(Buffer&&) noexcept = default;
+    // Deep copy: a copied backend (a forked hypothesis, see robust/mh_backend.h) owns its tree.
+    Buffer(const Buffer& o) : capacity(o.capacity) {
+      if (o.p) {
+        p.reset(new double[capacity]);
+        std::copy(o.p.get(), o.p.get() + capacity, p.get());
+      }
+    }
+    Buffer& operator=(const Buffer& o) {
+      if (this != &o) *this = Buffer(o);
+      return *this;
+    }
     double* data() { return p.get(); }
     const double* data() const { return p.get(); }
     void ensure(size_t n) {
