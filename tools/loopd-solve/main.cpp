@@ -38,6 +38,7 @@ int run(const tools::SolveOptions& opt) {
   BackendOptions bo;
   bo.maxIterations = opt.maxIterations;
   bo.linearInitialization = opt.linearInit;
+  bo.robustParameter = opt.robustParameter;
   if (!opt.quiet && !opt.incremental)
     bo.progress = [](const IterationReport& r) {
       std::fprintf(stderr, "  iter %3d  chi2 %.9g  %s %.3g  %s  %.2f ms\n", r.iteration, r.chi2,

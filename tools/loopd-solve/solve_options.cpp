@@ -1,5 +1,6 @@
 #include "tools/loopd-solve/solve_options.h"
 
+#include <cmath>
 #include <cstdlib>
 #include <iostream>
 #include <stdexcept>
@@ -12,11 +13,15 @@ std::string solveUsage() {
   std::string s =
       "usage: loopd-solve INPUT [--solver NAME] [--incremental] [--out EST.g2o]\n"
       "                   [--stats STATS.json] [--covariances COV.txt]\n"
-      "                   [--max-iterations N] [--init linear|file] [--quiet]\n\n"
+      "                   [--max-iterations N] [--init linear|file] [--robust-parameter X]\n"
+      "                   [--quiet]\n\n"
       "INPUT: g2o (2D/3D), TORO (VERTEX2/EDGE2/EQUIV) or Victoria Park (ODOMETRY/LANDMARK).\n"
       "--incremental  feed poses in index order, one update per pose, as a robot would\n"
       "--init         linear (default): chordal (3D) / orientation-first (2D) start;\n"
-      "               file: start from the file's vertices (or composed odometry)\n\nsolvers:\n";
+      "               file: start from the file's vertices (or composed odometry)\n"
+      "--robust-parameter  the robust variant's parameter (kernel width, DCS phi, switch prior\n"
+      "               sigma, max-mixture null weight, GNC cbar^2, riSAM shape c); 0 (default):\n"
+      "               the variant's own default (robust/README.md)\n\nsolvers:\n";
   for (const auto& b : availableBackends())
     s += "  " + b.name + std::string(10 - std::min<size_t>(9, b.name.size()), ' ') +
          b.description + "\n";
@@ -56,6 +61,14 @@ SolveOptions parseSolveOptions(int argc, char** argv) {
       if (v != "linear" && v != "file")
         throw std::invalid_argument("--init takes linear or file, got '" + v + "'");
       o.linearInit = v == "linear";
+    } else if (a == "--robust-parameter") {
+      const std::string v = value(i, a);
+      char* end = nullptr;
+      const double x = std::strtod(v.c_str(), &end);
+      if (v.empty() || *end != '\0' || !(x >= 0.0) || !std::isfinite(x))
+        throw std::invalid_argument("--robust-parameter takes a finite number >= 0, got '" + v +
+                                    "'");
+      o.robustParameter = x;
     } else if (a == "--quiet" || a == "-q") {
       o.quiet = true;
     } else if (!a.empty() && a[0] == '-') {
