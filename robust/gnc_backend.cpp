@@ -9,6 +9,21 @@
 
 namespace loopd {
 
+TailGate tailGate(std::vector<double> q, double exponent, double medianFactor) {
+  TailGate t;
+  std::vector<double> v;
+  for (double x : q)
+    if (std::isfinite(x) && x >= 0.0) v.push_back(x);
+  if (v.size() < 10) return t;
+  std::sort(v.begin(), v.end());
+  auto at = [&](double p) { return v[std::min(v.size() - 1, static_cast<size_t>(p * v.size()))]; };
+  t.scale = at(0.5);
+  const double p90 = at(0.9), p99 = at(0.99);
+  if (!(p90 > 0.0)) return t;
+  t.gate = std::min(medianFactor * t.scale, p99 * std::pow(p99 / p90, exponent));
+  return t;
+}
+
 GncBackend::GncBackend(BackendOptions options, GncOptions gnc)
     : BatchBackend(std::move(options)), gnc_(gnc) {}
 
@@ -59,12 +74,7 @@ void GncBackend::optimize() {
   firstSolve_ = false;
 
   const int n = graph_.size();
-  weights_.assign(n, 1.0);
   const Values start = estimate_;
-  BatchBackend::optimize();  // plain least squares (all weights 1)
-  int iterations = summary_.iterations;
-  const double initialChi2 = summary_.initialChi2;
-
   std::vector<double> r2(n, 0.0), c2(n, 0.0);
   auto residuals = [&] {
     for (int i = 0; i < n; ++i)
@@ -74,58 +84,123 @@ void GncBackend::optimize() {
   for (int i = 0; i < n; ++i)
     if (isUncertain(graph_[i]->role())) c2[i] = barc2(*graph_[i]), anyUncertain = true;
   outer_ = 0;
-  if (!anyUncertain) return;
-  residuals();
-  double maxRatio = 0.0;
-  for (int i = 0; i < n; ++i)
-    if (c2[i] > 0.0) maxRatio = std::max(maxRatio, r2[i] / c2[i]);
-
-  std::string reason = "max outer iterations";
-  if (gnc_.loss == GncLoss::GemanMcClure) {
-    mu_ = std::max(1.0, 2.0 * maxRatio);
-  } else {
-    if (maxRatio <= 1.0) {
-      mu_ = 0.0;
-      summary_.stopReason = "gnc: every residual below the inlier threshold";
-      return;
-    }
-    mu_ = std::max(1e-6, 1.0 / (2.0 * maxRatio - 1.0));
-  }
-
-  double prevCost = -1.0;
+  scale_ = 0.0;
+  refine_ = 0;
+  int iterations = 0;
+  double initialChi2 = 0.0;
+  std::string reason;
   OptimizerResult last;
-  for (outer_ = 1; outer_ <= gnc_.maxOuterIterations; ++outer_) {
-    updateWeights(r2, c2);
-    if (!gnc_.warmStart) estimate_.assignFrom(start);
-    last = solveOnce();
-    iterations += last.iterations;
+  const bool noiseAware = gnc_.tailExponent >= 0.0 && options_.robustParameter <= 0.0;
+
+  // One GNC from `start` with thresholds c2: the plain least-squares solve, then the μ steps.
+  auto gncPass = [&](bool first) {
+    weights_.assign(n, 1.0);
+    if (!first) estimate_.assignFrom(start);
+    BatchBackend::optimize();  // plain least squares (all weights 1)
+    iterations += summary_.iterations;
+    if (first) initialChi2 = summary_.initialChi2;
+    last.finalChi2 = summary_.finalChi2;
+    last.converged = summary_.converged;
+    outer_ = 0;
+    if (!anyUncertain) return;
     residuals();
-    const double cost = last.finalWeightedCost;
-    if (gnc_.loss == GncLoss::GemanMcClure && mu_ <= 1.0) {
-      reason = "gnc: mu reached 1";
-      break;
+    double maxRatio = 0.0;
+    for (int i = 0; i < n; ++i)
+      if (c2[i] > 0.0) maxRatio = std::max(maxRatio, r2[i] / c2[i]);
+    reason = "max outer iterations";
+    if (gnc_.loss == GncLoss::GemanMcClure) {
+      mu_ = std::max(1.0, 2.0 * maxRatio);
+    } else {
+      if (maxRatio <= 1.0) {
+        mu_ = 0.0;
+        reason = "gnc: every residual below the inlier threshold";
+        return;
+      }
+      mu_ = std::max(1e-6, 1.0 / (2.0 * maxRatio - 1.0));
     }
-    if (gnc_.loss == GncLoss::TruncatedLeastSquares) {
-      bool binary = true;
-      for (int i = 0; i < n && binary; ++i)
-        binary = weights_[i] < gnc_.weightsTol || weights_[i] > 1.0 - gnc_.weightsTol;
-      if (binary) {
-        reason = "gnc: weights converged";
+    double prevCost = -1.0;
+    for (outer_ = 1; outer_ <= gnc_.maxOuterIterations; ++outer_) {
+      updateWeights(r2, c2);
+      if (!gnc_.warmStart) estimate_.assignFrom(start);
+      last = solveOnce();
+      iterations += last.iterations;
+      residuals();
+      const double cost = last.finalWeightedCost;
+      if (gnc_.loss == GncLoss::GemanMcClure && mu_ <= 1.0) {
+        reason = "gnc: mu reached 1";
         break;
       }
+      if (gnc_.loss == GncLoss::TruncatedLeastSquares) {
+        bool binary = true;
+        for (int i = 0; i < n && binary; ++i)
+          binary = weights_[i] < gnc_.weightsTol || weights_[i] > 1.0 - gnc_.weightsTol;
+        if (binary) {
+          reason = "gnc: weights converged";
+          break;
+        }
+      }
+      if (prevCost >= 0.0 &&
+          std::abs(cost - prevCost) <= gnc_.relativeCostTol * std::max(prevCost, 1e-12)) {
+        reason = "gnc: cost converged";
+        break;
+      }
+      prevCost = cost;
+      mu_ = gnc_.loss == GncLoss::GemanMcClure ? std::max(1.0, mu_ / gnc_.muStep)
+                                               : mu_ * gnc_.muStep;
     }
-    if (prevCost >= 0.0 &&
-        std::abs(cost - prevCost) <= gnc_.relativeCostTol * std::max(prevCost, 1e-12)) {
-      reason = "gnc: cost converged";
-      break;
+    outer_ = std::min(outer_, gnc_.maxOuterIterations);
+    // Report the weights at the final estimate (the last solve moved it); the solve itself
+    // used the previous ones, as in GTSAM.
+    updateWeights(r2, c2);
+  };
+  gncPass(true);
+  if (!anyUncertain) return;
+  if (noiseAware) {
+    // The tail of the accepted closures' normalized χ² (χ²/χ²_dim(0.5)) decides the gate.
+    std::vector<double> q;
+    for (int i = 0; i < n; ++i)
+      if (c2[i] > 0.0 && weights_[i] >= 0.5)
+        q.push_back(r2[i] / chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5));
+    const TailGate t = tailGate(q, gnc_.tailExponent, gnc_.medianFactor);
+    scale_ = t.scale;
+    tailGate_ = t.gate;
+    bool wider = false;
+    std::vector<double> gate(n, 0.0);
+    for (int i = 0; i < n; ++i)
+      if (c2[i] > 0.0) {
+        gate[i] = std::max(c2[i], t.gate * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5));
+        if (gate[i] > gnc_.widenFactor * c2[i]) wider = true;
+      }
+    if (wider) {
+      // Heavy-tailed closures (over-confident information): the χ²_dim(p) threshold dropped
+      // true closures in the GNC's non-convex phase. Redo the GNC with the wider gate.
+      c2 = gate;
+      const int firstOuter = outer_;
+      gncPass(false);
+      outer_ += firstOuter;
+      reason += "; redone with the noise-aware gate";
     }
-    prevCost = cost;
-    mu_ = gnc_.loss == GncLoss::GemanMcClure ? std::max(1.0, mu_ / gnc_.muStep)
-                                             : mu_ * gnc_.muStep;
+    // Refinement: decide 0/1 against the gate at the current estimate, re-solve, repeat.
+    for (int it = 0; wider && it < gnc_.maxRefineIterations; ++it) {
+      bool changed = false;
+      for (int i = 0; i < n; ++i) {
+        if (c2[i] <= 0.0) continue;
+        const double w = r2[i] <= gate[i] ? 1.0 : 0.0;
+        changed = changed || w != weights_[i];
+        weights_[i] = w;
+      }
+      if (!changed && it > 0) break;
+      ++refine_;
+      last = solveOnce();
+      iterations += last.iterations;
+      residuals();
+      if (!changed) break;
+    }
+    char buf[128];
+    std::snprintf(buf, sizeof buf, "; noise scale %.3g, tail gate %.3g x chi2_dim(0.5), %d refinement solves",
+                  scale_, tailGate_, refine_);
+    reason += buf;
   }
-  // Report the weights at the final estimate (the last solve moved it); the solve itself used
-  // the previous ones, as in GTSAM.
-  updateWeights(r2, c2);
   summary_.iterations = iterations;
   summary_.initialChi2 = initialChi2;
   summary_.finalChi2 = last.finalChi2;

@@ -34,7 +34,30 @@ struct GncOptions {
   /// Outer steps start from the previous solution (true) or, as GTSAM does, from the values
   /// the GNC started from (false).
   bool warmStart = true;
+  /// Noise-aware gate (off when BackendOptions::robustParameter > 0 or tailExponent < 0).
+  /// Loop-closure information is rarely calibrated: intel's true closures sit at
+  /// χ² ≈ 0.007·χ²_dim, manhattan's have a heavy tail (max 30× the median) that a
+  /// χ²_dim(0.99) test cuts. After the GNC, the accepted closures' normalized χ²
+  /// (q = χ²/χ²_dim(0.5)) give
+  ///   g = min(medianFactor·q50, q99·(q99/q90)^tailExponent)
+  /// (the tail extrapolated by its own steepness, capped by a multiple of the median). Only if
+  /// g·χ²_dim(0.5) > widenFactor·c̄² for some factor (a heavy tail: manhattan) is the GNC
+  /// redone from the same start with c̄² = max(c̄², g·χ²_dim(0.5)), then refined: decide 0/1
+  /// (χ² ≤ gate) at the current estimate, re-solve, until no decision changes. Otherwise the
+  /// plain GNC's decisions stand.
+  double tailExponent = 3.0;
+  double medianFactor = 100.0;
+  double widenFactor = 2.0;
+  int maxRefineIterations = 20;
 };
+
+/// Noise scale and tail gate of normalized χ² values q_i = χ²_i/χ²_{dim_i}(0.5): scale = the
+/// median (1 for honest information, < 1 under-confident, > 1 over-confident), gate =
+/// min(medianFactor·median, q99·(q99/q90)^exponent). Both 0 with fewer than 10 values.
+struct TailGate {
+  double scale = 0.0, gate = 0.0;
+};
+TailGate tailGate(std::vector<double> q, double exponent, double medianFactor);
 
 class GncBackend : public BatchBackend {
  public:
@@ -47,6 +70,10 @@ class GncBackend : public BatchBackend {
 
   int outerIterations() const { return outer_; }
   double finalMu() const { return mu_; }
+  /// The noise scale, the tail gate (0 if not run) and the refinement solves of the last run.
+  double noiseScaleUsed() const { return scale_; }
+  double tailGateUsed() const { return tailGate_; }
+  int refineIterations() const { return refine_; }
 
  protected:
   const double* factorWeights() const override {
@@ -61,6 +88,8 @@ class GncBackend : public BatchBackend {
   std::vector<double> weights_;
   double mu_ = 0.0;
   int outer_ = 0;
+  double scale_ = 0.0, tailGate_ = 0.0;
+  int refine_ = 0;
   bool firstSolve_ = true;
 };
 
