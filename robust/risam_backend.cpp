@@ -5,6 +5,8 @@
 #include <stdexcept>
 #include <unordered_set>
 
+#include "robust/gnc_backend.h"
+
 namespace loopd {
 
 RisamBackend::RisamBackend(std::unique_ptr<Backend> inner, RisamOptions options)
@@ -14,22 +16,80 @@ double RisamBackend::nextMu(double mu) const {
   return std::min(1.0, mu + 1.2 * (mu - options_.muInit + 0.1));
 }
 
+double RisamBackend::shapeSquared(int dim) const {
+  if (options_.shape > 0.0) return options_.shape * options_.shape;
+  const double d = chi2Quantile(std::max(dim, 1), 0.95);
+  return gate_ > 0.0 ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5)) : d;
+}
+
+double RisamBackend::rejectChi2(int dim) const {
+  const double d = chi2Quantile(std::max(dim, 1), options_.rejectChi2Probability);
+  return gate_ > 0.0 ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5)) : d;
+}
+
+void RisamBackend::refreshGate() {
+  if (options_.shape > 0.0 || options_.tailExponent < 0.0) return;
+  if (graduated_.size() < static_cast<size_t>(options_.gateMinSamples)) return;
+  const Values& x = inner_->estimate();
+  std::vector<double> q;
+  q.reserve(graduated_.size());
+  for (const auto& [id, g] : graduated_) {
+    const int dim = std::max(g.original->dim(), 1);
+    const double c2 = g.original->chi2(x);
+    if (c2 <= rejectChi2(dim)) q.push_back(c2 / chi2Quantile(dim, 0.5));
+  }
+  gateAtCount_ = graduated_.size();
+  const TailGate t = tailGate(q, options_.tailExponent, options_.medianFactor);
+  // Widen only (heavy tails); never narrower than the χ²_dim defaults.
+  bool wider = false;
+  for (int dim = 1; dim <= 6 && t.gate > 0.0; ++dim)
+    if (t.gate * chi2Quantile(dim, 0.5) > options_.widenFactor * chi2Quantile(dim, 0.95))
+      wider = true;
+  if (wider && t.gate > gate_) gate_ = t.gate;
+}
+
 std::shared_ptr<GraduatedFactor> RisamBackend::wrap(const FactorPtr& f, double mu,
                                                     FactorId internal) const {
-  const double c = options_.shape > 0.0 ? options_.shape
-                                        : std::sqrt(chi2Quantile(f->dim(), 0.95));
+  const double c = std::sqrt(shapeSquared(f->dim()));
   auto w = GraduatedFactor::make(f, mu, c);
   w->setId(internal);
   return w;
 }
 
 UpdateResult RisamBackend::update(const BackendUpdate& u) {
+  size_t incoming = 0;
+  for (const FactorPtr& f : u.factors)
+    if (f && isUncertain(f->role())) ++incoming;
+  if (incoming > 0 && graduated_.size() + incoming >
+                          static_cast<size_t>((1.0 + options_.gateRefreshGrowth) * gateAtCount_))
+    refreshGate();  // the shape the new factors are graduated with
   std::unordered_set<FactorId> removing(u.removals.begin(), u.removals.end());
   BackendUpdate first;
   first.initial = u.initial;
   FactorId nextInternal = nextInternal_;
   auto newInternal = [&] { return kInternalIdBit | nextInternal++; };
 
+  // Consistent arrivals skip the graduation: every new uncertain factor already fits the
+  // current estimate (new variables at their initial values) within the inlier test.
+  bool consistent = options_.skipConsistent && incoming > 0;
+  if (consistent) {
+    const Values& x = inner_->estimate();
+    for (const FactorPtr& f : u.factors) {
+      if (!f || !isUncertain(f->role())) continue;
+      Values local;
+      for (int k = 0; k < f->size() && consistent; ++k) {
+        const Key key = f->key(k);
+        const int su = u.initial.slot(key);
+        const int sx = su < 0 ? x.slot(key) : -1;
+        if (su >= 0) local.insertFrom(u.initial, su);
+        else if (sx >= 0) local.insertFrom(x, sx);
+        else consistent = false;
+      }
+      if (!consistent || !(f->chi2(local) <= options_.consistentFraction * rejectChi2(f->dim())))
+        consistent = false;
+      if (!consistent) break;
+    }
+  }
   for (FactorId id : u.removals) {
     auto it = graduated_.find(id);
     first.removals.push_back(it == graduated_.end() ? id : it->second.internalId);
@@ -50,13 +110,13 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     Graduated g;
     g.original = f;
     g.internalId = newInternal();
-    g.wrapper = wrap(f, options_.muInit, g.internalId);
+    g.wrapper = wrap(f, consistent ? 1.0 : options_.muInit, g.internalId);
     first.factors.push_back(g.wrapper);
     active.push_back(g);
     activeIds.push_back(f->id());
     inActive.insert(f->id());
   }
-  if (options_.graduateNeighbours && !active.empty()) {
+  if (options_.graduateNeighbours && !active.empty() && !consistent) {
     const size_t numNew = active.size();
     for (size_t a = 0; a < numNew; ++a) {
       const Factor& f = *active[a].original;
@@ -107,7 +167,7 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
                 ids.end());
 
   // Graduate the active set: each step re-adds its factors at the next μ.
-  if (!active.empty()) {
+  if (!active.empty() && !consistent) {
     double mu = options_.muInit;
     int extra = options_.extraIterations;
     while (mu < 1.0 || extra-- > 0) {
@@ -129,6 +189,12 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   return result;
 }
 
+void RisamBackend::optimize() {
+  inner_->optimize();
+  gateAtCount_ = 0;
+  refreshGate();
+}
+
 std::vector<std::pair<FactorId, double>> RisamBackend::decisions() const {
   std::vector<std::pair<FactorId, double>> out;
   out.reserve(graduated_.size());
@@ -145,7 +211,7 @@ std::vector<FactorId> RisamBackend::rejected() const {
   const Values& x = inner_->estimate();
   for (const auto& f : originals_.factors())
     if (graduated_.count(f->id()) &&
-        !(f->chi2(x) <= chi2Quantile(f->dim(), options_.rejectChi2Probability)))
+        !(f->chi2(x) <= rejectChi2(f->dim())))
       out.push_back(f->id());
   return out;
 }
