@@ -3,6 +3,7 @@
 #include <stdexcept>
 
 #include "robust/gnc_backend.h"
+#include "robust/mh_backend.h"
 #include "robust/risam_backend.h"
 #include "robust/robust_backend.h"
 #include "solvers/batch/batch_backend.h"
@@ -93,6 +94,8 @@ const std::vector<Entry>& registry() {
          if (o.robustParameter > 0.0) r.shape = o.robustParameter;
          return std::make_unique<RisamBackend>(robustInner(o), r);
        }},
+      {{"mh", "multi-hypothesis iSAM2 (MH-iSAM2 manner) for ambiguous measurements; K = 10", true},
+       [](const BackendOptions& o) { return std::make_unique<MhBackend>(o, MhOptions{}); }},
   };
   return entries;
 }

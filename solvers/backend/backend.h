@@ -4,6 +4,7 @@
 #include <Eigen/Core>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -13,13 +14,29 @@
 
 namespace loopd {
 
+/// One measurement the front-end could not decide: k alternative factors (ids unique like any
+/// factor's), at most one of them true; with nullHypothesis, possibly none. Multi-measurement
+/// (same keys, k measurements) and multi-association (one measurement, k candidate keys)
+/// are both just alternatives here.
+struct AmbiguousFactor {
+  FactorId id = 0;  // the measurement's own id (a namespace of its own)
+  std::vector<FactorPtr> alternatives;
+  bool nullHypothesis = false;
+};
+
 /// What one update brings: new factors (ids unique within the backend), initial values for
-/// the new variables they introduce, and ids of factors to remove. Applied atomically.
+/// the new variables they introduce, ambiguous measurements over existing or new variables,
+/// and ids of factors to remove. Applied atomically.
 struct BackendUpdate {
   std::vector<FactorPtr> factors;
   Values initial;
   std::vector<FactorId> removals;
+  std::vector<AmbiguousFactor> ambiguous;
 };
+
+/// For variants without hypotheses: every alternative becomes an ordinary factor (a decoy is
+/// then just another loop closure for the robust kernels to judge).
+void flattenAmbiguous(BackendUpdate& update);
 
 struct UpdateResult {
   double seconds = 0.0;
@@ -45,6 +62,8 @@ struct BackendOptions {
   double moveThreshold = 1e-4;
   /// Variant parameter (kernel width, switch prior, …); 0 = the variant's default.
   double robustParameter = 0.0;
+  /// mh: live hypotheses kept at most (K).
+  int maxHypotheses = 10;
   std::function<void(const IterationReport&)> progress;
 };
 
@@ -53,7 +72,8 @@ class Backend {
   virtual ~Backend() = default;
   virtual std::string name() const = 0;
 
-  /// Applies the update and re-solves (incrementally where the variant can).
+  /// Applies the update and re-solves (incrementally where the variant can). Variants that
+  /// do not handlesAmbiguous() refuse a non-empty update.ambiguous: callers flatten it first.
   /// Throws std::invalid_argument, leaving the backend unchanged, if the update refers to
   /// unknown keys or ids, or lacks an initial value for a new variable.
   virtual UpdateResult update(const BackendUpdate& update) = 0;
@@ -80,6 +100,12 @@ class Backend {
   virtual std::vector<std::pair<FactorId, double>> decisions() const { return {}; }
   /// Ids of factors judged outliers.
   virtual std::vector<FactorId> rejected() const { return {}; }
+
+  /// True for variants that keep alternatives apart (mh); others flatten them.
+  virtual bool handlesAmbiguous() const { return false; }
+  /// Position of the alternative of ambiguous measurement `id` that the best hypothesis took,
+  /// −1 for none (null); nullopt if this variant does not choose (see chooseAlternative).
+  virtual std::optional<int> chosenAlternative(FactorId /*id*/) const { return std::nullopt; }
 
   virtual SolveSummary summary() const = 0;
   /// Σ rᵀr over all factors at the current estimate (robust weights not applied).

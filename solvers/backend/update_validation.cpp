@@ -7,6 +7,10 @@ namespace loopd {
 
 void validateUpdate(const BackendUpdate& u, const Values& existing,
                     const std::unordered_map<FactorId, int>& factorIndex, const Values& initial) {
+  if (!u.ambiguous.empty())
+    throw std::invalid_argument(
+        "this solver does not keep ambiguous measurements apart: flatten them first "
+        "(flattenAmbiguous) or use the mh solver");
   std::unordered_map<FactorId, int> removing;
   for (FactorId id : u.removals) {
     if (!factorIndex.count(id))

@@ -7,7 +7,8 @@
 
 namespace loopd {
 
-/// Throws std::invalid_argument if `u` removes an unknown id or one id twice, gives an initial
+/// Throws std::invalid_argument if `u` carries ambiguous measurements (see flattenAmbiguous),
+/// removes an unknown id or one id twice, gives an initial
 /// value for a variable the backend already has, adds a duplicate id (an id may be removed and
 /// re-added in the same update), or refers to a variable that is neither in `existing` nor in
 /// `initial` (or has the wrong type there). `factorIndex` holds the backend's factor ids;

@@ -47,6 +47,15 @@ struct Edge {
   int index = 0;
 };
 
+/// `HYPOTHESES k [null]` (g2o files): the next k edges are the alternatives of one ambiguous
+/// measurement, at most one of them true; with `null`, possibly none.
+struct HypothesisGroup {
+  int firstEdge = 0;  // index of the first alternative in Dataset::edges
+  int count = 0;      // k: the alternatives are edges firstEdge … firstEdge + k − 1
+  bool null = false;
+  int line = 0;       // the HYPOTHESES line
+};
+
 struct Dataset {
   std::string path;
   std::string format;        // "g2o", "toro", "victoria"
@@ -57,6 +66,8 @@ struct Dataset {
   std::vector<Edge> edges;        // file order
   /// TORO EQUIV lines: pairs of pose ids that are the same place.
   std::vector<std::pair<std::int64_t, std::int64_t>> equivalences;
+  /// Ambiguous measurements in file order (their edges are in `edges` too).
+  std::vector<HypothesisGroup> hypotheses;
 };
 
 /// Every reader failure: names the file, the 1-based line (0 if not line-specific), and why.

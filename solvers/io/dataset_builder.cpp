@@ -33,6 +33,7 @@ void DatasetBuilder::noteDimension(const LineScanner& in, bool is3d) {
 }
 
 void DatasetBuilder::addVertex(const LineScanner& in, const Vertex& v) {
+  expectNoOpenGroup(in);
   noteDimension(in, is3dVertex(v.type));
   auto& ids = v.isLandmark() && !landmarkIdsShared_ ? landmarkIds_ : vertexIds_;
   const auto [it, inserted] = ids.emplace(v.id, Seen{v.isLandmark(), v.line});
@@ -51,10 +52,43 @@ void DatasetBuilder::addEdge(const LineScanner& in, Edge e) {
     in.fail(std::string(in.tag()) + " connects vertex " + std::to_string(e.from) + " to itself");
   }
   e.index = static_cast<int>(ds_.edges.size());
+  if (groupEdgesPending_ > 0) {
+    const HypothesisGroup& g = ds_.hypotheses.back();
+    const Edge& first = g.firstEdge < e.index ? ds_.edges[g.firstEdge] : e;
+    if (e.type != first.type) {
+      in.fail("the alternatives of HYPOTHESES on line " + std::to_string(g.line) +
+              " must all be " + std::string(in.tag()) + "-like edges of one type (line " +
+              std::to_string(first.line) + " differs)");
+    }
+    --groupEdgesPending_;
+  }
   ds_.edges.push_back(e);
 }
 
+void DatasetBuilder::beginHypotheses(const LineScanner& in, int count, bool null) {
+  expectNoOpenGroup(in);
+  if (count < 1) in.fail("HYPOTHESES needs at least one alternative");
+  if (count == 1 && !null) in.fail("HYPOTHESES 1 without null is an ordinary edge");
+  HypothesisGroup g;
+  g.firstEdge = static_cast<int>(ds_.edges.size());
+  g.count = count;
+  g.null = null;
+  g.line = in.line();
+  ds_.hypotheses.push_back(g);
+  groupEdgesPending_ = count;
+}
+
+void DatasetBuilder::expectNoOpenGroup(const LineScanner& in) const {
+  if (groupEdgesPending_ > 0) {
+    const HypothesisGroup& g = ds_.hypotheses.back();
+    in.fail("HYPOTHESES on line " + std::to_string(g.line) + " expects " +
+            std::to_string(g.count) + " edge lines, but " + std::to_string(groupEdgesPending_) +
+            " are missing before this " + std::string(in.tag()) + " line");
+  }
+}
+
 void DatasetBuilder::addEquivalence(const LineScanner& in, std::int64_t a, std::int64_t b) {
+  expectNoOpenGroup(in);
   if (a == b) in.fail(std::string(in.tag()) + " joins vertex " + std::to_string(a) + " to itself");
   ds_.equivalences.emplace_back(a, b);
   equivalenceLines_.push_back(in.line());
@@ -76,6 +110,17 @@ std::string DatasetBuilder::vertexProblem(std::int64_t id, bool landmark) const 
 
 Dataset DatasetBuilder::finish() {
   if (ds_.edges.empty()) throw DatasetError(ds_.path, 0, "the file has no edges");
+  if (groupEdgesPending_ > 0) {
+    const HypothesisGroup& g = ds_.hypotheses.back();
+    throw DatasetError(ds_.path, g.line,
+                       "HYPOTHESES expects " + std::to_string(g.count) + " edge lines, but the file ends " +
+                           std::to_string(groupEdgesPending_) + " short");
+  }
+  if (!ds_.hypotheses.empty() && !ds_.hadVertices) {
+    throw DatasetError(ds_.path, ds_.hypotheses.front().line,
+                       "HYPOTHESES needs a file with vertex lines (poses are not composed from "
+                       "ambiguous edges)");
+  }
   if (!ds_.hadVertices) {
     initialiseFromOdometry(ds_, landmarkIdsShared_);
     return std::move(ds_);

@@ -23,6 +23,10 @@ class DatasetBuilder {
   void addVertex(const LineScanner& in, const Vertex& v);
   void addEdge(const LineScanner& in, Edge e);
   void addEquivalence(const LineScanner& in, std::int64_t a, std::int64_t b);
+  /// `HYPOTHESES k [null]`: the next k lines must be edges of one type.
+  void beginHypotheses(const LineScanner& in, int count, bool null);
+  /// Fails if a HYPOTHESES group still waits for edges (call before a non-edge line).
+  void expectNoOpenGroup(const LineScanner& in) const;
 
   /// Whole-file checks, then the dataset (poses composed from odometry if it had none).
   Dataset finish();
@@ -42,6 +46,7 @@ class DatasetBuilder {
   std::unordered_map<std::int64_t, Seen> vertexIds_;    // all vertices, or poses only
   std::unordered_map<std::int64_t, Seen> landmarkIds_;  // when landmarks have their own ids
   std::vector<int> equivalenceLines_;                   // parallel to ds_.equivalences
+  int groupEdgesPending_ = 0;                           // edges the last HYPOTHESES still needs
 };
 
 }  // namespace loopd::io::detail

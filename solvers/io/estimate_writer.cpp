@@ -61,6 +61,12 @@ class G2oText {
     }
     text_ += '\n';
   }
+  void hypotheses(const HypothesisGroup& g) {
+    text_ += "HYPOTHESES";
+    integer(g.count);
+    if (g.null) text_ += " null";
+    text_ += '\n';
+  }
   const std::string& text() const { return text_; }
 
  private:
@@ -116,7 +122,12 @@ void writeG2oGraph(const std::string& path, const Dataset& graph) {
   }
   G2oText out;
   appendVertices(out, graph);
-  for (const Edge& e : graph.edges) {
+  size_t nextGroup = 0;
+  for (size_t i = 0; i < graph.edges.size(); ++i) {
+    const Edge& e = graph.edges[i];
+    while (nextGroup < graph.hypotheses.size() &&
+           graph.hypotheses[nextGroup].firstEdge == static_cast<int>(i))
+      out.hypotheses(graph.hypotheses[nextGroup++]);
     if (!edgeTag(e.type)) {
       throw DatasetError(
           path, 0,

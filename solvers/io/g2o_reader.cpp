@@ -34,6 +34,7 @@ constexpr EdgeTag kEdgeTags[] = {
     {"EDGE_SE3_TRACKXYZ", EdgeType::PosePoint3},
 };
 constexpr std::string_view kFix = "FIX";
+constexpr std::string_view kHypotheses = "HYPOTHESES";  // loopd's ambiguous-measurement group
 
 template <class Entry, std::size_t N>
 const Entry* lookUp(const Entry (&table)[N], std::string_view tag) {
@@ -46,7 +47,7 @@ const Entry* lookUp(const Entry (&table)[N], std::string_view tag) {
 }  // namespace
 
 bool detail::isG2oTag(std::string_view tag) {
-  return lookUp(kVertexTags, tag) || lookUp(kEdgeTags, tag) || tag == kFix;
+  return lookUp(kVertexTags, tag) || lookUp(kEdgeTags, tag) || tag == kFix || tag == kHypotheses;
 }
 
 Dataset parseG2o(std::string_view text, const std::string& name) {
@@ -57,7 +58,19 @@ Dataset parseG2o(std::string_view text, const std::string& name) {
       out.addVertex(in, detail::readVertex(in, v->type));
     } else if (const EdgeTag* e = lookUp(kEdgeTags, in.tag())) {
       out.addEdge(in, detail::readEdge(in, e->type, detail::Uncertainty::Information));
+    } else if (in.tag() == kHypotheses) {
+      in.expectAtLeast(1);
+      if (in.count() > 2) in.fail("HYPOTHESES takes a count and an optional 'null'");
+      const std::int64_t k = in.id(0);
+      if (k > 1000) in.fail("HYPOTHESES count " + std::to_string(k) + " is over 1000");
+      bool null = false;
+      if (in.count() == 2) {
+        if (in.field(1) != "null") in.fail("HYPOTHESES: expected 'null', got " + detail::quoted(in.field(1)));
+        null = true;
+      }
+      out.beginHypotheses(in, static_cast<int>(k), null);
     } else if (in.tag() == kFix) {
+      out.expectNoOpenGroup(in);
       // Gauge fixing: the solvers choose their own gauge, but the ids must still be ids.
       in.expectAtLeast(1);
       for (std::size_t i = 0; i < in.count(); ++i) in.id(i);

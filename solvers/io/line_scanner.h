@@ -36,6 +36,8 @@ class LineScanner {
   void expectAtLeast(std::size_t min) const;
   /// Field i after the tag (0-based) as an integer id.
   std::int64_t id(std::size_t i) const;
+  /// Field i after the tag (0-based) as it is written.
+  std::string_view field(std::size_t i) const { return fields_[i + 1]; }
   /// Field i after the tag (0-based) as a finite double.
   double number(std::size_t i) const;
   /// Throws DatasetError(path, line, reason).

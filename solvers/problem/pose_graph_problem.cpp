@@ -83,6 +83,18 @@ PoseGraphProblem buildProblem(const io::Dataset& ds) {
     std::const_pointer_cast<Factor>(f)->setId(static_cast<FactorId>(e.index));
     p.graph.add(std::move(f));
   }
+  for (const io::HypothesisGroup& g : ds.hypotheses) {
+    AmbiguousGroup group;
+    group.null = g.null;
+    for (int i = 0; i < g.count; ++i) {
+      const int f = g.firstEdge + i;
+      // An alternative is never trusted, even between consecutive poses.
+      auto factor = std::const_pointer_cast<Factor>(p.graph[f]);
+      if (factor->role() == FactorRole::Odometry) factor->setRole(FactorRole::LoopClosure);
+      group.factors.push_back(f);
+    }
+    p.ambiguous.push_back(std::move(group));
+  }
   // TORO EQUIV: the two poses are one place.
   for (const auto& [a, b] : ds.equivalences) {
     auto f = std::make_shared<BetweenFactorSE2>(poseKey(static_cast<std::uint64_t>(a)),
@@ -93,6 +105,14 @@ PoseGraphProblem buildProblem(const io::Dataset& ds) {
     p.graph.add(std::move(f));
   }
   return p;
+}
+
+AmbiguousFactor ambiguousFactor(const PoseGraphProblem& p, int group) {
+  AmbiguousFactor a;
+  a.id = static_cast<FactorId>(group);
+  a.nullHypothesis = p.ambiguous[group].null;
+  for (int f : p.ambiguous[group].factors) a.alternatives.push_back(p.graph[f]);
+  return a;
 }
 
 void storeEstimate(const Values& estimate, io::Dataset& ds) {

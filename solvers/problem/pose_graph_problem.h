@@ -4,13 +4,22 @@
 #include <cstdint>
 #include <vector>
 
+#include "solvers/backend/backend.h"
 #include "solvers/graph/factor_graph.h"
 #include "solvers/io/dataset.h"
 
 namespace loopd {
 
+/// One ambiguous measurement of the file (a HYPOTHESES group): its alternatives are factors
+/// of the graph, at most one of them true (none, with `null`).
+struct AmbiguousGroup {
+  std::vector<int> factors;  // graph indices, in file order
+  bool null = false;
+};
+
 struct PoseGraphProblem {
-  FactorGraph graph;          // factor i is the file's edge i (id() = i)
+  FactorGraph graph;          // factor i is the file's edge i (id() = i), alternatives included
+  std::vector<AmbiguousGroup> ambiguous;  // file order
   Values initial;             // poses first (file order), then landmarks
   bool is3d = false;
   Key firstPose = 0;          // the gauge: lowest pose id
@@ -22,10 +31,13 @@ struct PoseGraphProblem {
 };
 
 /// Builds factors and initial values. Between edges whose ends are consecutive ids are
-/// odometry, others loop closures; pose–landmark edges are landmark sightings. EQUIV pairs
+/// odometry, others (and every alternative of a HYPOTHESES group) loop closures; pose–landmark edges are landmark sightings. EQUIV pairs
 /// become tight between constraints (identity, information 1e6). Throws std::invalid_argument
 /// (naming the file line) for an edge the factors reject.
 PoseGraphProblem buildProblem(const io::Dataset& dataset);
+
+/// Group g as the Backend seam takes it: id g, alternatives the group's factors.
+AmbiguousFactor ambiguousFactor(const PoseGraphProblem& problem, int group);
 
 /// Copies an estimate back into a dataset's vertices (same ids), for the writers.
 void storeEstimate(const Values& estimate, io::Dataset& dataset);

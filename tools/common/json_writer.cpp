@@ -28,14 +28,19 @@ std::string jsonEscape(const std::string& s) {
   return out + "\"";
 }
 
+namespace {
+
+std::string number(double value) {
+  if (!std::isfinite(value)) return "null";
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.17g", value);
+  return buf;
+}
+
+}  // namespace
+
 JsonObject& JsonObject::add(const std::string& key, double value) {
-  if (!std::isfinite(value)) {
-    fields_.emplace_back(key, "null");
-  } else {
-    char buf[32];
-    std::snprintf(buf, sizeof(buf), "%.17g", value);
-    fields_.emplace_back(key, buf);
-  }
+  fields_.emplace_back(key, number(value));
   return *this;
 }
 JsonObject& JsonObject::add(const std::string& key, std::int64_t value) {
@@ -53,6 +58,13 @@ JsonObject& JsonObject::add(const std::string& key, const std::string& value) {
 JsonObject& JsonObject::add(const std::string& key, const std::vector<std::int64_t>& values) {
   std::string s = "[";
   for (size_t i = 0; i < values.size(); ++i) s += (i ? "," : "") + std::to_string(values[i]);
+  fields_.emplace_back(key, s + "]");
+  return *this;
+}
+
+JsonObject& JsonObject::add(const std::string& key, const std::vector<double>& values) {
+  std::string s = "[";
+  for (size_t i = 0; i < values.size(); ++i) s += (i ? "," : "") + number(values[i]);
   fields_.emplace_back(key, s + "]");
   return *this;
 }

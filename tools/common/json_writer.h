@@ -16,6 +16,7 @@ class JsonObject {
   JsonObject& add(const std::string& key, const std::string& value);
   JsonObject& add(const std::string& key, const char* value) { return add(key, std::string(value)); }
   JsonObject& add(const std::string& key, const std::vector<std::int64_t>& values);
+  JsonObject& add(const std::string& key, const std::vector<double>& values);
   std::string str() const;
   /// Throws std::runtime_error if the file cannot be written.
   void writeFile(const std::string& path) const;

@@ -21,7 +21,8 @@ const char* kUsage =
     "(Both are read for their vertex lines only.)\n"
     "RPE: mean translation / rotation error of consecutive relative poses.\n"
     "--truth + --stats: precision and recall of the stats' \"rejected\" against the truth's\n"
-    "\"outliers\". --graph (with --truth): chi2 of the estimate over the true edges only.\n";
+    "\"outliers\" (and, for loopd-outliers --ambiguous truth, the stats' \"chosen\" against\n"
+    "\"true_choice\"). --graph (with --truth): chi2 of the estimate over the true edges only.\n";
 
 }  // namespace
 
@@ -73,6 +74,27 @@ int main(int argc, char** argv) {
           .add("true_positives", s.truePositives).add("false_positives", s.falsePositives)
           .add("false_negatives", s.falseNegatives).add("precision", s.precision)
           .add("recall", s.recall);
+      // Ambiguous measurements (loopd-outliers --ambiguous): the choice against the truth.
+      const std::string truthText = tools::readTextFile(truth);
+      if (truthText.find("\"true_choice\"") != std::string::npos) {
+        const auto expected = tools::jsonIntArray(truthText, "true_choice");
+        const auto chosen = tools::jsonIntArray(tools::readTextFile(stats), "chosen");
+        if (chosen.size() != expected.size())
+          throw std::runtime_error("stats \"chosen\" has " + std::to_string(chosen.size()) +
+                                   " entries, the truth " + std::to_string(expected.size()));
+        int correct = 0, none = 0;
+        for (size_t i = 0; i < chosen.size(); ++i) {
+          correct += chosen[i] == expected[i];
+          none += chosen[i] < 0;
+        }
+        const double accuracy = expected.empty() ? 1.0 : double(correct) / expected.size();
+        std::printf("ambiguous %zu  true alternative chosen %d (%.4f)  none chosen %d\n",
+                    expected.size(), correct, accuracy, none);
+        out.add("ambiguous", static_cast<std::int64_t>(expected.size()))
+            .add("chosen_correct", correct)
+            .add("chosen_accuracy", accuracy)
+            .add("chosen_none", none);
+      }
     }
     if (!graph.empty()) {
       const io::Dataset g = io::readDataset(graph);

@@ -10,6 +10,7 @@
 #include "solvers/io/dataset_reader.h"
 #include "solvers/io/estimate_writer.h"
 #include "tools/common/cli.h"
+#include "tools/loopd-outliers/ambiguous_generator.h"
 #include "tools/loopd-outliers/outlier_generator.h"
 
 using namespace loopd;
@@ -25,7 +26,17 @@ const char* kUsage =
     "one random measurement. Measurements: uniform rotation, translation uniform up to the\n"
     "median loop-closure length; information of the median loop closure. Deterministic per\n"
     "seed (default 1). Writes OUT.g2o (all edges; the outliers last) and TRUTH.json\n"
-    "{input, mode, count, seed, group_size, outliers: [0-based edge indices], inlier_edges}.\n";
+    "{input, mode, count, seed, group_size, outliers: [0-based edge indices], inlier_edges}.\n\n"
+    "       loopd-outliers INPUT --ambiguous N [--alternatives K] [--null]\n"
+    "                      [--decoys target|measurement|mixed] [--window W] [--landmarks]\n"
+    "                      [--seed S] --out OUT.g2o --truth TRUTH.json\n\n"
+    "Turns N true loop closures (--landmarks: landmark re-sightings) into ambiguous\n"
+    "measurements: a 'HYPOTHESES K [null]' group (default K = 3) holding the true edge at a\n"
+    "random position and K - 1 decoys: a wrong target within W poses (default 10; for a\n"
+    "sighting, a nearby landmark already seen), or a wrong measurement (translation moved by\n"
+    "0.5-2 x the median loop length, rotation by 10-45 degrees). TRUTH.json: {input, mode:\n"
+    "ambiguous, count, alternatives, null, decoys, seed, outliers: [decoy edge indices],\n"
+    "true_choice: [per group], true_edges: [per group]}.\n";
 
 long parseInt(const std::string& flag, const std::string& v, long lo, long hi) {
   char* end = nullptr;
@@ -36,12 +47,20 @@ long parseInt(const std::string& flag, const std::string& v, long lo, long hi) {
   return n;
 }
 
+void writeTruth(const std::string& path, const std::string& json) {
+  std::ofstream t(path);
+  if (!t) throw std::runtime_error("cannot write " + path);
+  t << json;
+  if (!t) throw std::runtime_error("error writing " + path);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string input, out, truth;
   tools::OutlierOptions opt;
-  bool haveCount = false, haveMode = false;
+  tools::AmbiguousOptions amb;
+  bool haveCount = false, haveMode = false, ambiguous = false, haveWindow = false;
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
@@ -58,17 +77,28 @@ int main(int argc, char** argv) {
       } else if (a == "--group-size") {
         opt.groupSize = static_cast<int>(parseInt(a, value(), 1, 100000));
       } else if (a == "--window") {
-        opt.localWindow = static_cast<int>(parseInt(a, value(), 2, 100000000));
+        opt.localWindow = amb.window = static_cast<int>(parseInt(a, value(), 2, 100000000));
+        haveWindow = true;
       } else if (a == "--local-groups") {
         opt.localGroups = true;
       } else if (a == "--seed") {
-        opt.seed = static_cast<std::uint64_t>(parseInt(a, value(), 0, 0x7fffffffffffffffL));
+        opt.seed = amb.seed =
+            static_cast<std::uint64_t>(parseInt(a, value(), 0, 0x7fffffffffffffffL));
       } else if (a == "--out") {
         out = value();
       } else if (a == "--truth") {
         truth = value();
       } else if (a == "--ambiguous") {
-        throw std::invalid_argument("--ambiguous is not implemented yet");
+        amb.count = static_cast<int>(parseInt(a, value(), 0, 10000000));
+        ambiguous = true;
+      } else if (a == "--alternatives") {
+        amb.alternatives = static_cast<int>(parseInt(a, value(), 2, 1000));
+      } else if (a == "--null") {
+        amb.null = true;
+      } else if (a == "--decoys") {
+        amb.decoys = tools::decoyModeFromName(value());
+      } else if (a == "--landmarks") {
+        amb.landmarks = true;
       } else if (!a.empty() && a[0] == '-') {
         throw std::invalid_argument("unknown option " + a);
       } else if (input.empty()) {
@@ -78,8 +108,11 @@ int main(int argc, char** argv) {
       }
     }
     if (input.empty()) throw std::invalid_argument("no input file");
-    if (!haveCount) throw std::invalid_argument("--count is required");
-    if (!haveMode) throw std::invalid_argument("--mode is required");
+    if (ambiguous && (haveCount || haveMode))
+      throw std::invalid_argument("--ambiguous does not combine with --count/--mode");
+    if (!ambiguous && !haveCount) throw std::invalid_argument("--count is required");
+    if (!ambiguous && !haveMode) throw std::invalid_argument("--mode is required");
+    if (!haveWindow) amb.window = 10;
     if (out.empty() || truth.empty()) throw std::invalid_argument("--out and --truth are required");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "loopd-outliers: %s\n\n%s", e.what(), kUsage);
@@ -87,12 +120,18 @@ int main(int argc, char** argv) {
   }
   try {
     const io::Dataset dataset = io::readDataset(input);
+    if (ambiguous) {
+      const tools::AmbiguousResult r = tools::makeAmbiguous(dataset, amb);
+      io::writeG2oGraph(out, r.graph);
+      writeTruth(truth, tools::ambiguousTruthJson(input, amb, r));
+      std::fprintf(stderr, "%s: %d loop closures made ambiguous (%d alternatives%s, %s decoys) -> %s\n",
+                   input.c_str(), amb.count, amb.alternatives, amb.null ? " + null" : "",
+                   tools::decoyModeName(amb.decoys), out.c_str());
+      return 0;
+    }
     const tools::OutlierResult r = tools::addOutliers(dataset, opt);
     io::writeG2oGraph(out, r.graph);
-    std::ofstream t(truth);
-    if (!t) throw std::runtime_error("cannot write " + truth);
-    t << tools::outlierTruthJson(input, opt, r);
-    if (!t) throw std::runtime_error("error writing " + truth);
+    writeTruth(truth, tools::outlierTruthJson(input, opt, r));
     std::fprintf(stderr, "%s: %d edges + %d %s outliers -> %s\n", input.c_str(), r.inlierEdges,
                  static_cast<int>(r.outliers.size()), tools::outlierModeName(opt.mode), out.c_str());
     return 0;

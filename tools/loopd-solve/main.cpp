@@ -5,7 +5,9 @@
 #include <cstdio>
 #include <iostream>
 
+#include "robust/ambiguous_choice.h"
 #include "robust/backend_registry.h"
+#include "robust/mh_backend.h"
 #include "solvers/io/dataset_reader.h"
 #include "solvers/io/estimate_writer.h"
 #include "solvers/problem/pose_graph_problem.h"
@@ -39,6 +41,7 @@ int run(const tools::SolveOptions& opt) {
   bo.maxIterations = opt.maxIterations;
   bo.linearInitialization = opt.linearInit;
   bo.robustParameter = opt.robustParameter;
+  bo.maxHypotheses = opt.maxHypotheses;
   if (!opt.quiet && !opt.incremental)
     bo.progress = [](const IterationReport& r) {
       std::fprintf(stderr, "  iter %3d  chi2 %.9g  %s %.3g  %s  %.2f ms\n", r.iteration, r.chi2,
@@ -54,7 +57,14 @@ int run(const tools::SolveOptions& opt) {
     online = tools::runOnline(*backend, problem, opt.quiet);
   } else {
     BackendUpdate all;
-    all.factors = problem.graph.factors();
+    std::vector<char> alternative(problem.graph.size(), 0);
+    for (const AmbiguousGroup& g : problem.ambiguous)
+      for (int f : g.factors) alternative[f] = 1;
+    for (int f = 0; f < problem.graph.size(); ++f)
+      if (!alternative[f]) all.factors.push_back(problem.graph[f]);
+    for (int g = 0; g < static_cast<int>(problem.ambiguous.size()); ++g)
+      all.ambiguous.push_back(ambiguousFactor(problem, g));
+    if (!backend->handlesAmbiguous()) flattenAmbiguous(all);
     all.initial = problem.initial;
     backend->update(all);
   }
@@ -105,7 +115,26 @@ int run(const tools::SolveOptions& opt) {
           .add("closure_update_ms_p99", online.closures.p99Ms)
           .add("closure_update_ms_max", online.closures.maxMs);
     }
-    stats.add("rejected", rejected).add("peak_rss_mb", tools::peakRssMb());
+    stats.add("rejected", rejected);
+    if (!problem.ambiguous.empty()) {
+      std::vector<AmbiguousFactor> measurements;
+      for (int g = 0; g < static_cast<int>(problem.ambiguous.size()); ++g)
+        measurements.push_back(ambiguousFactor(problem, g));
+      std::vector<std::int64_t> chosen;
+      for (int c : chosenAlternatives(*backend, measurements)) chosen.push_back(c);
+      stats.add("chosen", chosen);
+    }
+    if (const auto* mh = dynamic_cast<const MhBackend*>(backend.get())) {
+      std::vector<double> scores;
+      for (const auto& h : mh->hypotheses(10)) scores.push_back(h.score);
+      stats.add("max_hypotheses", opt.maxHypotheses)
+          .add("live_hypotheses", mh->liveHypotheses())
+          .add("mean_live_hypotheses", mh->meanLiveHypotheses())
+          .add("hypothesis_scores", scores)
+          .add("branches_built", static_cast<std::int64_t>(mh->branchesBuilt()))
+          .add("branches_predicted_away", static_cast<std::int64_t>(mh->branchesPredictedAway()));
+    }
+    stats.add("peak_rss_mb", tools::peakRssMb());
     stats.writeFile(opt.stats);
   }
   return 0;

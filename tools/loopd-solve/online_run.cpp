@@ -28,6 +28,7 @@ UpdateTimes summarize(std::vector<double> ms) {
 }
 
 bool carriesLoopClosure(const BackendUpdate& u) {
+  if (!u.ambiguous.empty()) return true;
   for (const auto& f : u.factors)
     if (f->role() == FactorRole::LoopClosure) return true;
   return false;
@@ -43,6 +44,7 @@ OnlineRunStats runOnline(Backend& backend, const PoseGraphProblem& problem, bool
   for (size_t i = 0; i < steps.size(); ++i) {
     BackendUpdate u;
     for (int f : steps[i].factors) u.factors.push_back(problem.graph[f]);
+    for (int g : steps[i].groups) u.ambiguous.push_back(ambiguousFactor(problem, g));
     // The first pose starts where the file (or composed odometry) put it.
     if (!backend.estimate().contains(steps[i].pose)) {
       if (i == 0 || u.factors.empty()) {
@@ -50,6 +52,7 @@ OnlineRunStats runOnline(Backend& backend, const PoseGraphProblem& problem, bool
         u.initial.insertFrom(problem.initial, s);
       }
     }
+    if (!backend.handlesAmbiguous()) flattenAmbiguous(u);
     if (!predictMissingValues(u.factors, backend.estimate(), u.initial))
       throw std::runtime_error("cannot initialise the variables of pose " +
                                keyToString(steps[i].pose) + " from earlier ones");

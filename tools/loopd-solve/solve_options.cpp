@@ -14,14 +14,18 @@ std::string solveUsage() {
       "usage: loopd-solve INPUT [--solver NAME] [--incremental] [--out EST.g2o]\n"
       "                   [--stats STATS.json] [--covariances COV.txt]\n"
       "                   [--max-iterations N] [--init linear|file] [--robust-parameter X]\n"
-      "                   [--quiet]\n\n"
+      "                   [--max-hypotheses K] [--quiet]\n\n"
       "INPUT: g2o (2D/3D), TORO (VERTEX2/EDGE2/EQUIV) or Victoria Park (ODOMETRY/LANDMARK).\n"
       "--incremental  feed poses in index order, one update per pose, as a robot would\n"
       "--init         linear (default): chordal (3D) / orientation-first (2D) start;\n"
       "               file: start from the file's vertices (or composed odometry)\n"
       "--robust-parameter  the robust variant's parameter (kernel width, DCS phi, switch prior\n"
       "               sigma, max-mixture null weight, GNC cbar^2, riSAM shape c); 0 (default):\n"
-      "               the variant's own default (robust/README.md)\n\nsolvers:\n";
+      "               the variant's own default (robust/README.md)\n"
+      "--max-hypotheses  mh: live hypotheses kept at most (default 10)\n"
+      "INPUT may group edges as one ambiguous measurement: a line 'HYPOTHESES k [null]' makes\n"
+      "the next k edges its alternatives (mh keeps them apart; other solvers take them all).\n"
+      "\nsolvers:\n";
   for (const auto& b : availableBackends())
     s += "  " + b.name + std::string(10 - std::min<size_t>(9, b.name.size()), ' ') +
          b.description + "\n";
@@ -69,6 +73,13 @@ SolveOptions parseSolveOptions(int argc, char** argv) {
         throw std::invalid_argument("--robust-parameter takes a finite number >= 0, got '" + v +
                                     "'");
       o.robustParameter = x;
+    } else if (a == "--max-hypotheses") {
+      const std::string v = value(i, a);
+      char* end = nullptr;
+      const long n = std::strtol(v.c_str(), &end, 10);
+      if (v.empty() || *end != '\0' || n < 1 || n > 1000)
+        throw std::invalid_argument("--max-hypotheses takes an integer in 1..1000, got '" + v + "'");
+      o.maxHypotheses = static_cast<int>(n);
     } else if (a == "--quiet" || a == "-q") {
       o.quiet = true;
     } else if (!a.empty() && a[0] == '-') {

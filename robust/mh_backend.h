@@ -1,0 +1,122 @@
+#pragma once
+// Multi-hypothesis incremental smoothing in the manner of MH-iSAM2 (Hsiao & Kaess, ICRA 2019):
+// every ambiguous measurement (k alternatives, optionally none) is a layer of a hypothesis
+// tree; each live hypothesis is one leaf, with the choice it made at every layer, its own
+// Bayes tree and a score. See ../../shared/ROBUST_NOTES.md §6 and robust/README.md.
+//
+// Sharing: hypotheses share every factor object, the id bookkeeping and the validation; a
+// branch copies the parent's Bayes tree (copy on branch) and the last surviving child of a
+// parent takes the parent's tree itself. What is not shared is the tree numerics — unlike
+// MH-iSAM2, cliques do not carry per-hypothesis conditionals side by side.
+//
+// Scoring: a hypothesis's score is its accumulated χ² increase — the innovation test
+// Δχ² = rᵀ(I + JΣJᵀ)⁻¹r of each uncertain factor against the hypothesis's own marginal Σ of
+// the factor's keys, which is the exact increase of the minimum for a linear problem — plus
+// χ²_d(nullProbability) for every layer it answered "none". A layer's children are scored
+// before they are built, so only plausible ones ever are: an alternative above
+// χ²_d(gateProbability) is not branched on. While several hypotheses live, every later loop
+// closure is scored in each before it is added (a second inner update adds it), and
+// hypotheses are pruned: those more than
+// χ²_d(pruneProbability) worse than the best, and all beyond K. optimize() ranks them by χ² at
+// their optimum (plus null penalties).
+#include <array>
+#include <memory>
+#include <optional>
+#include <unordered_map>
+#include <vector>
+
+#include "solvers/backend/backend.h"
+#include "solvers/incremental/isam2.h"
+
+namespace loopd {
+
+struct MhOptions {
+  int maxHypotheses = 10;            // K: live hypotheses at most
+  double gateProbability = 0.9999;   // no branch for an alternative with Δχ² > χ²_d(p)
+  double nullProbability = 0.999;    // "none" costs χ²_d(p): an alternative must pass χ² at p
+  double pruneProbability = 0.95;    // drop a hypothesis more than χ²_d(p) worse than the best
+  Isam2Options isam;                 // each hypothesis's Bayes tree
+};
+
+/// One live hypothesis as reported (best first).
+struct HypothesisSummary {
+  double score = 0.0;
+  std::vector<int> choices;  // per ambiguous measurement, in arrival order: position or −1
+  const Values* estimate = nullptr;  // valid until the next update
+};
+
+class MhBackend : public Backend {
+ public:
+  MhBackend(BackendOptions options, MhOptions mh);
+
+  std::string name() const override { return "mh"; }
+  UpdateResult update(const BackendUpdate& update) override;
+  void optimize() override;
+  const Values& estimate() const override { return best().tree->estimate(); }
+  const FactorGraph& graph() const override { return best().tree->graph(); }
+  Eigen::MatrixXd marginalCovariance(const std::vector<Key>& keys) override;
+  std::vector<Eigen::MatrixXd> marginals(const std::vector<Key>& keys) override;
+  std::vector<std::pair<FactorId, double>> decisions() const override;
+  std::vector<FactorId> rejected() const override;
+  SolveSummary summary() const override { return best().tree->summary(); }
+  bool handlesAmbiguous() const override { return true; }
+  std::optional<int> chosenAlternative(FactorId id) const override;
+
+  /// Live hypotheses, best first (at most `count`).
+  std::vector<HypothesisSummary> hypotheses(int count) const;
+  int liveHypotheses() const { return static_cast<int>(live_.size()); }
+  /// Live hypotheses averaged over the updates so far (what the cost scales with).
+  double meanLiveHypotheses() const { return updates_ ? double(liveSum_) / updates_ : 1.0; }
+  /// Hypotheses built (branched) so far, and children never built because the prediction
+  /// pruned them.
+  long branchesBuilt() const { return branchesBuilt_; }
+  long branchesPredictedAway() const { return predictedAway_; }
+
+ private:
+  struct Hypothesis {
+    std::unique_ptr<Isam2Backend> tree;
+    std::vector<int> choices;  // per layer
+    double penalty = 0.0;      // null penalties of its "none" choices
+    double score = 0.0;
+    std::vector<Key> moved;    // by this update (for UpdateResult::moved)
+  };
+  struct Layer {
+    FactorId id = 0;
+    std::vector<FactorPtr> alternatives;
+    bool null = false;
+    int dim = 0;
+  };
+  struct Child {
+    int parent = 0;
+    int choice = -1;
+    double score = 0.0;
+  };
+
+  const Hypothesis& best() const { return live_.front(); }
+  void validate(const BackendUpdate& u, const Values& initial) const;
+  /// Branches every live hypothesis on layer `l` (keys must all exist).
+  void branch(int l);
+  /// Splits an update's factors into those added first and the uncertain ones scored after.
+  void splitScored(const std::vector<FactorPtr>& factors, std::vector<FactorPtr>& first,
+                   std::vector<FactorPtr>& scored) const;
+  /// Linearised χ² increase of adding f to h (the innovation test); f's keys must be in h.
+  double predictedIncrease(Hypothesis& h, const Factor& f);
+  /// Score = χ² at the estimate + null penalties (after optimize(), where that is the optimum).
+  void rescore();
+  void prune(int dim);
+  double nullPenalty(int dim) const;
+
+  BackendOptions options_;
+  MhOptions mh_;
+  std::vector<Hypothesis> live_;  // best first after every update
+  std::vector<Layer> layers_;
+  std::unordered_map<FactorId, int> layerIndex_;       // measurement id → layer
+  std::unordered_map<FactorId, int> ids_;  // factor id → −1 (plain) or its alternative's layer
+  int maxDim_ = 3;
+  long branchesBuilt_ = 0;
+  long predictedAway_ = 0;
+  long updates_ = 0;
+  long liveSum_ = 0;
+};
+
+}  // namespace loopd
