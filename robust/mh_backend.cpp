@@ -3,6 +3,7 @@
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -31,7 +32,9 @@ MhBackend::MhBackend(BackendOptions options, MhOptions mh)
   live_.push_back(std::move(root));
 }
 
-double MhBackend::nullPenalty(int dim) const { return chi2Quantile(dim, mh_.nullProbability); }
+double MhBackend::nullPenalty(const Layer& layer) const {
+  return chi2Quantile(layer.dim, mh_.nullProbability) - 2.0 * std::log(layer.nullWeight);
+}
 
 void MhBackend::validate(const BackendUpdate& u, const Values& initial) const {
   // The plain part and every alternative must pass as one ordinary update would.
@@ -57,6 +60,8 @@ void MhBackend::validate(const BackendUpdate& u, const Values& initial) const {
     if (layerIndex_.count(a.id) || !newMeasurements.insert(a.id).second)
       throw std::invalid_argument(what + ": duplicate id");
     if (a.alternatives.empty()) throw std::invalid_argument(what + " has no alternatives");
+    if (!(a.nullWeight > 0.0) || !std::isfinite(a.nullWeight))
+      throw std::invalid_argument(what + ": null weight must be positive and finite");
     if (a.alternatives.size() == 1 && !a.nullHypothesis)
       throw std::invalid_argument(what + " has one alternative and no null: send a factor");
     const int dim = a.alternatives.front() ? a.alternatives.front()->dim() : 0;
@@ -115,6 +120,7 @@ UpdateResult MhBackend::update(const BackendUpdate& u) {
     layer.id = a.id;
     layer.alternatives = a.alternatives;
     layer.null = a.nullHypothesis;
+    layer.nullWeight = a.nullWeight;
     layer.dim = a.alternatives.front()->dim();
     maxDim_ = std::max(maxDim_, layer.dim);
     const int l = static_cast<int>(layers_.size());
@@ -189,7 +195,7 @@ void MhBackend::branch(int l) {
       if (increase <= gate) children.push_back({p, a, parent.score + increase});
       else ++predictedAway_;
     }
-    if (layer.null) children.push_back({p, -1, parent.score + nullPenalty(layer.dim)});
+    if (layer.null) children.push_back({p, -1, parent.score + nullPenalty(layer)});
     // Without a null, one alternative is true: keep the least implausible.
     if (children.size() == first) children.push_back({p, lowestAt, parent.score + lowest});
   }
@@ -223,7 +229,7 @@ void MhBackend::branch(int l) {
     child.moved = parent.moved;
     child.score = c.score;
     if (c.choice < 0) {
-      child.penalty += nullPenalty(layer.dim);
+      child.penalty += nullPenalty(layer);
     } else {
       BackendUpdate add;
       add.factors.push_back(layer.alternatives[c.choice]);

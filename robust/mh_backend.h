@@ -12,7 +12,7 @@
 // Scoring: a hypothesis's score is its accumulated χ² increase — the innovation test
 // Δχ² = rᵀ(I + JΣJᵀ)⁻¹r of each uncertain factor against the hypothesis's own marginal Σ of
 // the factor's keys, which is the exact increase of the minimum for a linear problem — plus
-// χ²_d(nullProbability) for every layer it answered "none". A layer's children are scored
+// χ²_d(nullProbability) − 2 ln(null weight) for every layer it answered "none". A layer's children are scored
 // before they are built, so only plausible ones ever are: an alternative above
 // χ²_d(gateProbability) is not branched on. While several hypotheses live, every later loop
 // closure is scored in each before it is added (a second inner update adds it), and
@@ -84,6 +84,7 @@ class MhBackend : public Backend {
     FactorId id = 0;
     std::vector<FactorPtr> alternatives;
     bool null = false;
+    double nullWeight = 1.0;
     int dim = 0;
   };
   struct Child {
@@ -104,7 +105,8 @@ class MhBackend : public Backend {
   /// Score = χ² at the estimate + null penalties (after optimize(), where that is the optimum).
   void rescore();
   void prune(int dim);
-  double nullPenalty(int dim) const;
+  /// What answering "none" to a layer costs: χ²_d(nullProbability) − 2 ln(nullWeight).
+  double nullPenalty(const Layer& layer) const;
 
   BackendOptions options_;
   MhOptions mh_;

@@ -22,6 +22,8 @@ struct AmbiguousFactor {
   FactorId id = 0;  // the measurement's own id (a namespace of its own)
   std::vector<FactorPtr> alternatives;
   bool nullHypothesis = false;
+  /// Prior weight of "none" relative to one alternative (> 0; 1 = as likely as each).
+  double nullWeight = 1.0;
 };
 
 /// What one update brings: new factors (ids unique within the backend), initial values for
