@@ -1,7 +1,9 @@
 #include "robust/risam_backend.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <unordered_set>
 
@@ -19,7 +21,8 @@ double RisamBackend::nextMu(double mu) const {
 double RisamBackend::shapeSquared(int dim) const {
   if (options_.shape > 0.0) return options_.shape * options_.shape;
   const double d = chi2Quantile(std::max(dim, 1), 0.95);
-  return gate_ > 0.0 ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5)) : d;
+  return gate_ > 0.0 && options_.widenShape ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5))
+                                            : d;
 }
 
 double RisamBackend::rejectChi2(int dim) const {
@@ -170,7 +173,21 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   if (!active.empty() && !consistent) {
     double mu = options_.muInit;
     int extra = options_.extraIterations;
-    while (mu < 1.0 || extra-- > 0) {
+    // Absorbed at the convex step: every active factor already fits the new estimate, so the
+    // graduation could only confirm it; go straight to μ = 1 (one step instead of five).
+    if (options_.acceptAbsorbed) {
+      const Values& x = inner_->estimate();
+      bool absorbed = true;
+      for (size_t a = 0; a < active.size() && absorbed; ++a)
+        absorbed = active[a].original->chi2(x) <=
+                   options_.absorbedFraction * rejectChi2(active[a].original->dim());
+      if (absorbed) {
+        mu = 1.0;
+        extra = 0;
+        ++absorbedUpdates_;
+      }
+    }
+    while (mu < 1.0 || extra-- > 0 || lastInnerUpdates_ == 1) {
       mu = nextMu(mu);
       BackendUpdate step;
       for (FactorId id : activeIds) {
@@ -193,6 +210,81 @@ void RisamBackend::optimize() {
   inner_->optimize();
   gateAtCount_ = 0;
   refreshGate();
+  if (options_.retryRejected && graduated_.size() != retriedAtCount_) {
+    retriedAtCount_ = graduated_.size();
+    for (int round = 0; round < options_.retryRounds; ++round) {
+      if (retryRejected() == 0) break;
+      inner_->optimize();
+    }
+  }
+}
+
+double RisamBackend::predictedChi2(const Factor& f) {
+  // rᵀ(I + J Σ Jᵀ)⁻¹r: the whitened residual against its covariance when the map may still
+  // move by its marginal covariance Σ (joint over the factor's variables).
+  const Values& x = inner_->estimate();
+  std::vector<Key> keys;
+  std::array<const double*, kMaxFactorKeys> xp{};
+  std::array<JacobianBlock, kMaxFactorKeys> jb{};
+  std::array<double*, kMaxFactorKeys> jp{};
+  int cols = 0;
+  for (int i = 0; i < f.size(); ++i) {
+    const int s = x.slot(f.key(i));
+    if (s < 0) return std::numeric_limits<double>::infinity();
+    xp[i] = x.data(s);
+    jp[i] = jb[i].data();
+    keys.push_back(f.key(i));
+    cols += varDim(f.varType(i));
+  }
+  const int d = f.dim();
+  Eigen::VectorXd r(d);
+  f.evaluate(xp.data(), r.data(), jp.data());
+  Eigen::MatrixXd J(d, cols);
+  for (int i = 0, c = 0; i < f.size(); c += varDim(f.varType(i)), ++i)
+    J.middleCols(c, varDim(f.varType(i))) =
+        Eigen::Map<const Eigen::MatrixXd>(jb[i].data(), d, varDim(f.varType(i)));
+  const Eigen::MatrixXd sigma = inner_->marginalCovariance(keys);
+  if (sigma.rows() != cols || sigma.cols() != cols) return std::numeric_limits<double>::infinity();
+  const Eigen::MatrixXd S = Eigen::MatrixXd::Identity(d, d) + J * sigma * J.transpose();
+  Eigen::LDLT<Eigen::MatrixXd> ldlt(S);
+  if (ldlt.info() != Eigen::Success) return std::numeric_limits<double>::infinity();
+  return r.dot(ldlt.solve(r));
+}
+
+int RisamBackend::retryRejected() {
+  std::vector<FactorId> retry;
+  int tested = 0;
+  const std::vector<FactorId> rej = rejected();
+  for (FactorId id : rej) {
+    if (tested >= options_.retryMaxTests) break;
+    auto it = graduated_.find(id);
+    if (it == graduated_.end()) continue;
+    ++tested;
+    const Factor& f = *it->second.original;
+    if (predictedChi2(f) <= std::max(chi2Quantile(std::max(f.dim(), 1), options_.retryProbability),
+                                     rejectChi2(f.dim())))
+      retry.push_back(id);
+  }
+  if (retry.empty()) return 0;
+  // Graduate them again from μ_init, as new arrivals.
+  double mu = options_.muInit;
+  int extra = options_.extraIterations;
+  bool first = true;
+  while (first || mu < 1.0 || extra-- > 0) {
+    if (!first) mu = nextMu(mu);
+    first = false;
+    BackendUpdate step;
+    for (FactorId id : retry) {
+      Graduated& g = graduated_[id];
+      step.removals.push_back(g.internalId);
+      g.internalId = kInternalIdBit | nextInternal_++;
+      g.wrapper = wrap(g.original, mu, g.internalId);
+      step.factors.push_back(g.wrapper);
+    }
+    inner_->update(step);
+  }
+  retried_ += static_cast<int>(retry.size());
+  return static_cast<int>(retry.size());
 }
 
 std::vector<std::pair<FactorId, double>> RisamBackend::decisions() const {

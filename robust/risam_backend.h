@@ -40,12 +40,29 @@ struct RisamOptions {
   double medianFactor = 100.0;
   double widenFactor = 2.0;
   double gateRefreshGrowth = 0.1;
+  /// Also widen the SIG shape c² to the gate. Off: on manhattan + 100 random outliers it let
+  /// one outlier in (ATE 4.8 m); with the default shape every outlier is rejected.
+  bool widenShape = false;
   /// An update whose new uncertain factors all have χ² ≤ consistentFraction·(rejection
   /// threshold) at the current estimate (new variables at their initial values) adds them at
   /// μ = 1 with no graduation and no neighbour reset: one inner update instead of six.
   /// Off: on manhattan few true closures fit at arrival (odometry drift), so it saved no
   /// time (3.31 s vs 3.36 s) and, with 100 random outliers, let 1 in (ATE 4.8 m).
   bool skipConsistent = false;
+  /// After the first (convex, μ = μ_init) inner update, if every active factor has
+  /// χ² ≤ absorbedFraction·(rejection threshold) at the new estimate, re-add them once at
+  /// μ = 1 instead of walking the schedule (2 inner updates instead of 6).
+  bool acceptAbsorbed = true;
+  double absorbedFraction = 0.5;
+  /// At optimize() (the end of a run, the server's idle solve) each rejected factor is tested
+  /// against the map's own uncertainty: rᵀ(I + JΣJᵀ)⁻¹r ≤ χ²_dim(retryProbability) with Σ the
+  /// joint marginal covariance of its variables. Those that pass (true closures dropped while
+  /// the map was drifted) are graduated again from μ_init. At most retryMaxTests marginals per
+  /// call; nothing is retested until the number of uncertain factors changes.
+  bool retryRejected = true;
+  double retryProbability = 0.99;
+  int retryMaxTests = 2000;
+  int retryRounds = 3;
   double consistentFraction = 1.0;
   int gateMinSamples = 200;  // q99 needs a few hundred samples to mean anything
 };
@@ -62,6 +79,10 @@ class RisamBackend : public DecoratorBackend {
 
   /// Inner updates run by the last update() (1 + schedule steps when it graduated factors).
   int lastInnerUpdates() const { return lastInnerUpdates_; }
+  /// Updates whose graduation was cut short because the convex step absorbed every factor.
+  int absorbedUpdates() const { return absorbedUpdates_; }
+  /// Rejected factors graduated again by optimize() (they passed the marginal test).
+  int retriedFactors() const { return retried_; }
   static constexpr FactorId kInternalIdBit = FactorId{1} << 63;
 
  private:
@@ -74,6 +95,8 @@ class RisamBackend : public DecoratorBackend {
   double shapeSquared(int dim) const;
   double rejectChi2(int dim) const;
   void refreshGate();
+  double predictedChi2(const Factor& f);
+  int retryRejected();
   std::shared_ptr<GraduatedFactor> wrap(const FactorPtr& f, double mu, FactorId internal) const;
 
   RisamOptions options_;
@@ -81,6 +104,9 @@ class RisamBackend : public DecoratorBackend {
   std::unordered_map<Key, std::vector<FactorId>> byKey_;       // key → uncertain ids (lazy)
   FactorId nextInternal_ = 0;
   int lastInnerUpdates_ = 0;
+  int absorbedUpdates_ = 0;
+  int retried_ = 0;
+  size_t retriedAtCount_ = 0;
   double gate_ = 0.0;             // noise-aware gate (normalized), 0 = defaults
   size_t gateAtCount_ = 0;        // number of uncertain factors at the last refresh
  public:
