@@ -173,8 +173,10 @@ double MhBackend::predictedIncrease(Hypothesis& h, const Factor& f) {
   S.diagonal().array() += 1.0;  // whitened measurement noise
   const Eigen::VectorXd rd = r.head(d);
   Eigen::LLT<Eigen::MatrixXd> llt(S);
-  if (llt.info() != Eigen::Success) return std::numeric_limits<double>::infinity();
-  return rd.dot(llt.solve(rd));
+  const double increase = llt.info() == Eigen::Success ? rd.dot(llt.solve(rd)) : -1.0;
+  // Unusable numerics (NaN, indefinite S) make the alternative implausible, never a NaN score.
+  return increase >= 0.0 && std::isfinite(increase) ? increase
+                                                    : std::numeric_limits<double>::infinity();
 }
 
 void MhBackend::branch(int l) {
@@ -202,7 +204,7 @@ void MhBackend::branch(int l) {
   std::stable_sort(children.begin(), children.end(),
                    [](const Child& a, const Child& b) { return a.score < b.score; });
   const double limit = children.front().score + chi2Quantile(layer.dim, mh_.pruneProbability);
-  size_t keep = 0;
+  size_t keep = 1;  // the best child always lives
   while (keep < children.size() && keep < static_cast<size_t>(mh_.maxHypotheses) &&
          children[keep].score <= limit)
     ++keep;

@@ -12,6 +12,7 @@
 #include "solvers/io/dataset_reader.h"
 #include "solvers/io/estimate_writer.h"
 #include "tools/loopd-eval/trajectory_metrics.h"
+#include "tools/loopd-outliers/ambiguous_generator.h"
 #include "tools/loopd-outliers/outlier_generator.h"
 
 namespace loopd::tools {
@@ -147,6 +148,89 @@ TEST(OutliersEvalBinaries, EndToEnd) {
   const std::string e = readTextFile(json);
   EXPECT_NEAR(jsonNumber(e, "ate_rmse", -1), 0.0, 1e-9);
   EXPECT_EQ(std::system((kBin + "/tools/loopd-outliers 2>/dev/null").c_str()) != 0, true);
+}
+
+TEST(AmbiguousGenerator, GroupsHoldTheTrueEdgeAndWrongDecoys) {
+  const io::Dataset d = io::readDataset(kDatasets + "/intel.g2o");
+  for (DecoyMode mode : {DecoyMode::Target, DecoyMode::Measurement, DecoyMode::Mixed}) {
+    AmbiguousOptions o;
+    o.count = 25;
+    o.alternatives = 4;
+    o.null = mode == DecoyMode::Mixed;
+    o.decoys = mode;
+    o.seed = 3;
+    const AmbiguousResult a = makeAmbiguous(d, o), b = makeAmbiguous(d, o);
+    ASSERT_EQ(a.graph.hypotheses.size(), 25u);
+    EXPECT_EQ(a.graph.edges.size(), d.edges.size() + 25 * 3);
+    EXPECT_EQ(a.decoys.size(), 75u);
+    EXPECT_EQ(a.trueChoice, b.trueChoice);
+    EXPECT_EQ(a.decoys, b.decoys);
+    std::set<int> decoys(a.decoys.begin(), a.decoys.end());
+    for (size_t g = 0; g < a.graph.hypotheses.size(); ++g) {
+      const io::HypothesisGroup& h = a.graph.hypotheses[g];
+      EXPECT_EQ(h.count, 4);
+      EXPECT_EQ(h.null, o.null);
+      const io::Edge& truth = a.graph.edges[a.trueEdges[g]];
+      EXPECT_EQ(a.trueEdges[g], h.firstEdge + a.trueChoice[g]);
+      EXPECT_FALSE(decoys.count(a.trueEdges[g]));
+      EXPECT_GE(std::llabs(truth.to - truth.from), 2);  // a loop closure of the input
+      for (int k = 0; k < h.count; ++k) {
+        if (k == a.trueChoice[g]) continue;
+        const io::Edge& e = a.graph.edges[h.firstEdge + k];
+        EXPECT_TRUE(decoys.count(h.firstEdge + k));
+        const bool sameKeys = e.from == truth.from && e.to == truth.to;
+        // Wrong target with the same measurement, or the same keys with a wrong one.
+        EXPECT_NE(sameKeys, e.measurement == truth.measurement);
+        if (mode == DecoyMode::Target && !sameKeys) {
+          EXPECT_LE(std::max(std::llabs(e.from - truth.from), std::llabs(e.to - truth.to)), 10);
+        }
+        if (mode == DecoyMode::Measurement) EXPECT_TRUE(sameKeys);
+      }
+    }
+  }
+  AmbiguousOptions tooMany;
+  tooMany.count = 100000;
+  EXPECT_THROW(makeAmbiguous(d, tooMany), std::invalid_argument);
+}
+
+TEST(OutliersEvalBinaries, AmbiguousEndToEnd) {
+  // loopd-outliers --ambiguous → loopd-solve --solver mh → loopd-eval's choice accuracy; a
+  // solver without hypotheses reports its choices too.
+  const std::string dir = ::testing::TempDir();
+  const std::string graph = dir + "/intel_amb.g2o", truth = dir + "/intel_amb.json",
+                    stats = dir + "/intel_amb_stats.json", est = dir + "/intel_amb_est.g2o",
+                    ref = dir + "/intel_ref.g2o", json = dir + "/intel_amb_eval.json";
+  const std::string gen = kBin + "/tools/loopd-outliers " + kDatasets +
+                          "/intel.g2o --ambiguous 30 --null --decoys mixed --seed 4 --out " + graph +
+                          " --truth " + truth + " 2>/dev/null";
+  ASSERT_EQ(std::system(gen.c_str()), 0) << gen;
+  const std::string solveRef = kBin + "/tools/loopd-solve " + kDatasets +
+                               "/intel.g2o --solver isam2 --incremental -q --out " + ref;
+  ASSERT_EQ(std::system(solveRef.c_str()), 0) << solveRef;
+  const std::string solve = kBin + "/tools/loopd-solve " + graph +
+                            " --solver mh --incremental -q --max-hypotheses 5 --stats " + stats +
+                            " --out " + est;
+  ASSERT_EQ(std::system(solve.c_str()), 0) << solve;
+  const std::string s = readTextFile(stats);
+  EXPECT_EQ(jsonIntArray(s, "chosen"), jsonIntArray(readTextFile(truth), "true_choice"));
+  EXPECT_EQ(jsonNumber(s, "max_hypotheses", 0), 5);
+  EXPECT_GE(jsonNumber(s, "live_hypotheses", 0), 1);
+  const std::string eval = kBin + "/tools/loopd-eval --reference " + ref + " --estimate " + est +
+                           " --truth " + truth + " --stats " + stats + " --graph " + graph +
+                           " --json " + json + " > /dev/null";
+  ASSERT_EQ(std::system(eval.c_str()), 0) << eval;
+  const std::string e = readTextFile(json);
+  EXPECT_EQ(jsonNumber(e, "chosen_accuracy", 0), 1.0);
+  EXPECT_EQ(jsonNumber(e, "precision", 0), 1.0);
+  EXPECT_EQ(jsonNumber(e, "recall", 0), 1.0);
+  EXPECT_LT(jsonNumber(e, "ate_rmse", 1), 1e-3);
+
+  const std::string plain = kBin + "/tools/loopd-solve " + graph +
+                            " --solver isam2 --incremental -q --stats " + stats;
+  ASSERT_EQ(std::system(plain.c_str()), 0) << plain;
+  EXPECT_EQ(jsonIntArray(readTextFile(stats), "chosen").size(), 30u);
+  const std::string badK = kBin + "/tools/loopd-solve " + graph + " --max-hypotheses 0 2>/dev/null";
+  EXPECT_NE(std::system(badK.c_str()), 0);
 }
 
 }  // namespace
