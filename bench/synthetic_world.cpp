@@ -4,7 +4,19 @@
 // most recent such pose (with probability --closure-prob). Written as g2o 2D with the
 // odometry-composed start as vertices. Deterministic for a seed.
 //
-//   loopd-synth --poses N --out world.g2o [--seed S] [--closure-prob P] [--min-gap G]
+// Two worlds (--world):
+//  city    (default) the robot drives across a city that is larger than anything it maps:
+//          it roams a neighbourhood (a square of side 2·--window+1 cells) whose centre moves
+//          one cell east every --advance poses, so it keeps exploring new streets while it
+//          revisits the ones around it. Loop density per pose is that of the square world
+//          at 1000 poses, at every size; loops are as long as a neighbourhood is wide.
+//  square  the robot stays in one square whose side grows like √N, so at 100k poses it
+//          revisits places it left tens of thousands of poses before, anywhere on the map
+//          (the worst case for an incremental solver: loops of every length, and a graph
+//          whose separators grow like √N).
+//
+//   loopd-synth --poses N --out world.g2o [--world city|square] [--seed S]
+//               [--closure-prob P] [--min-gap G] [--window H] [--advance K]
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -27,6 +39,9 @@ struct Options {
   unsigned seed = 1;
   double closureProb = 0.5;
   long minGap = 20;
+  std::string world = "city";
+  long window = 15;   // city: half side of the neighbourhood roamed
+  long advance = 30;  // city: poses per one-cell move of the neighbourhood
 };
 
 Options parse(int argc, char** argv) {
@@ -39,9 +54,15 @@ Options parse(int argc, char** argv) {
     else if (a == "--seed") o.seed = static_cast<unsigned>(std::stoul(next()));
     else if (a == "--closure-prob") o.closureProb = std::stod(next());
     else if (a == "--min-gap") o.minGap = std::stol(next());
+    else if (a == "--world") o.world = next();
+    else if (a == "--window") o.window = std::stol(next());
+    else if (a == "--advance") o.advance = std::stol(next());
     else throw std::invalid_argument("unknown option " + a);
   }
   if (o.out.empty() || o.poses < 2) throw std::invalid_argument("need --poses N>=2 and --out");
+  if (o.world != "city" && o.world != "square")
+    throw std::invalid_argument("--world is city or square");
+  if (o.window < 2 || o.advance < 1) throw std::invalid_argument("need --window >= 2, --advance >= 1");
   return o;
 }
 
@@ -54,7 +75,7 @@ int main(int argc, char** argv) {
   } catch (const std::exception& e) {
     std::fprintf(stderr,
                  "loopd-synth: %s\nusage: loopd-synth --poses N --out world.g2o [--seed S] "
-                 "[--closure-prob P] [--min-gap G]\n",
+                 "[--world city|square] [--closure-prob P] [--min-gap G] [--window H] [--advance K]\n",
                  e.what());
     return 2;
   }
@@ -67,9 +88,12 @@ int main(int argc, char** argv) {
                loopd::wrapAngle(z.theta + sigmaTheta * n01(rng)));
   };
 
-  // Ground truth on the grid; the robot turns at random but stays within a square whose
-  // side grows like sqrt(N), so revisits keep happening at every size.
-  const long half = std::max<long>(5, static_cast<long>(std::sqrt(static_cast<double>(o.poses)) / 2));
+  // Ground truth on the grid; the robot turns at random but stays within a square: of side
+  // ~√N for the square world (revisits keep happening at every size), or the neighbourhood
+  // around a centre that moves east for the city world.
+  const bool city = o.world == "city";
+  const long half = city ? o.window
+                         : std::max<long>(5, static_cast<long>(std::sqrt(static_cast<double>(o.poses)) / 2));
   std::vector<SE2> truth{SE2()};
   std::vector<std::pair<long, long>> cell{{0, 0}};
   std::map<std::pair<long, long>, long> lastVisit{{{0, 0}, 0}};
@@ -81,12 +105,19 @@ int main(int argc, char** argv) {
     const double r = u01(rng);
     int turn = r < 0.15 ? 1 : (r < 0.3 ? -1 : 0);
     auto [cx, cy] = cell.back();
+    const long centre = city ? k / o.advance : 0;
+    auto inside = [&](long x, long y) { return std::labs(x - centre) <= half && std::labs(y) <= half; };
+    bool found = false;
     for (int attempt = 0; attempt < 4; ++attempt) {
       const int h = (heading + turn + 4) % 4;
       const long nx = cx + (h == 0) - (h == 2), ny = cy + (h == 1) - (h == 3);
-      if (std::labs(nx) <= half && std::labs(ny) <= half) break;
+      if (inside(nx, ny)) {
+        found = true;
+        break;
+      }
       turn = turn == 0 ? 1 : turn + 1;  // bounce off the border
     }
+    if (city && !found && !inside(cx, cy)) turn = (0 - heading + 4) % 4;  // left behind: drive east
     heading = (heading + turn + 4) % 4;
     cx += (heading == 0) - (heading == 2);
     cy += (heading == 1) - (heading == 3);

@@ -53,6 +53,7 @@ int Isam2Backend::addVariable(const Values& from, int slot) {
   localIdx_.push_back(-1);
   constrainedStamp_.push_back(-1);
   movedStamp_.push_back(-1);
+  touched_.push_back(updateCount_);
   if (firstPose_ < 0 && keyKind(theta_.key(v)) == KeyKind::Pose &&
       (theta_.type(v) == VarType::SE2 || theta_.type(v) == VarType::SE3))
     firstPose_ = v;
@@ -227,7 +228,10 @@ UpdateResult Isam2Backend::update(const BackendUpdate& u) {
     idIndex_[f->id()] = index;
     graph_.add(f);
     if (f->role() == FactorRole::Prior) ++priorCount_;
-    for (int k = 0; k < f->size(); ++k) constrainedStamp_[factorVars_[index][k]] = epoch_;
+    for (int k = 0; k < f->size(); ++k) {
+      constrainedStamp_[factorVars_[index][k]] = epoch_;
+      touched_[factorVars_[index][k]] = updateCount_;
+    }
   }
   manageGauge();
   if (updateCount_ % isam_.relinearizeSkip == 0) relinearize(false);
@@ -309,45 +313,115 @@ void Isam2Backend::recompute() {
       for (int i = 0; i < m; ++i)
         if ((constrainedStamp_[topVars[i]] == epoch_) == (pass == 1)) order[next++] = i;
   } else {
+    // The top's rows (its factors and the orphans' separator factors) as lists of columns.
     const int nrow = static_cast<int>(topFactors.size() + orphans.size());
-    std::vector<int> colCount(m + 1, 0);
-    auto forEachRowVar = [&](auto&& fn) {
-      for (int r = 0; r < static_cast<int>(topFactors.size()); ++r) {
-        const int f = topFactors[r];
-        for (int k = 0; k < factors_[f]->size(); ++k) fn(r, scratchPos_[factorVars_[f][k]]);
-      }
-      for (size_t o = 0; o < orphans.size(); ++o) {
-        const Clique& O = cliques_[orphans[o]];
-        const int r = static_cast<int>(topFactors.size() + o);
-        for (size_t i = O.numFrontals; i < O.vars.size(); ++i) fn(r, scratchPos_[O.vars[i]]);
-      }
-    };
-    int nnz = 0;
-    forEachRowVar([&](int, int col) { ++colCount[col + 1], ++nnz; });
-    std::vector<int> p(m + 1, 0);
-    for (int j = 0; j < m; ++j) p[j + 1] = p[j] + colCount[j + 1];
+    std::vector<int> rowPtr(nrow + 1, 0), rowCol;
+    rowCol.reserve(static_cast<size_t>(nrow) * 3);
+    for (int r = 0; r < static_cast<int>(topFactors.size()); ++r) {
+      const int f = topFactors[r];
+      for (int k = 0; k < factors_[f]->size(); ++k) rowCol.push_back(scratchPos_[factorVars_[f][k]]);
+      rowPtr[r + 1] = static_cast<int>(rowCol.size());
+    }
+    for (size_t o = 0; o < orphans.size(); ++o) {
+      const Clique& O = cliques_[orphans[o]];
+      for (size_t i = O.numFrontals; i < O.vars.size(); ++i) rowCol.push_back(scratchPos_[O.vars[i]]);
+      rowPtr[topFactors.size() + o + 1] = static_cast<int>(rowCol.size());
+    }
+    const int nnz = static_cast<int>(rowCol.size());
+    std::vector<int> colPtr(m + 1, 0);
+    for (int c : rowCol) ++colPtr[c + 1];
+    for (int j = 0; j < m; ++j) colPtr[j + 1] += colPtr[j];
     const size_t alen = ccolamd_recommended(nnz, nrow, m);
-    std::vector<int> A(alen);
-    std::vector<int> fill(p.begin(), p.end() - 1);
-    forEachRowVar([&](int r, int col) { A[fill[col]++] = r; });
+    std::vector<int> A(alen), p(m + 1);
+    // CCOLAMD with constraint groups (null: unconstrained); false if it failed.
+    auto runCcolamd = [&](const int* cmember, std::vector<int>& out) {
+      std::vector<int> fill(colPtr.begin(), colPtr.end() - 1);
+      for (int r = 0; r < nrow; ++r)
+        for (int i = rowPtr[r]; i < rowPtr[r + 1]; ++i) A[fill[rowCol[i]]++] = r;
+      std::copy(colPtr.begin(), colPtr.end(), p.begin());
+      double knobs[CCOLAMD_KNOBS];
+      int statsOut[CCOLAMD_STATS];
+      ccolamd_set_defaults(knobs);
+      if (!ccolamd(nrow, m, static_cast<int>(alen), A.data(), p.data(), knobs, statsOut,
+                   const_cast<int*>(cmember)))
+        return false;
+      out.assign(p.begin(), p.begin() + m);
+      return true;
+    };
+    // Elimination work of an ordering: Σ over variables of dim · (dim of its column)², from
+    // a symbolic elimination (a variable's structure: its rows' later variables and its
+    // elimination-tree children's).
+    auto eliminationCost = [&](const std::vector<int>& ord) {
+      std::vector<int> pos(m), home(nrow), homeHead(m, -1), homeNext(nrow, -1);
+      for (int k = 0; k < m; ++k) pos[ord[k]] = k;
+      for (int r = 0; r < nrow; ++r) {
+        int h = m;
+        for (int i = rowPtr[r]; i < rowPtr[r + 1]; ++i) h = std::min(h, pos[rowCol[i]]);
+        homeNext[r] = homeHead[h];
+        homeHead[h] = r;
+      }
+      std::vector<std::vector<int>> st(m);
+      std::vector<int> childHead(m, -1), childNext(m, -1), mark(m, -1);
+      double cost = 0.0;
+      for (int k = 0; k < m; ++k) {
+        std::vector<int>& sk = st[k];
+        mark[k] = k;
+        int first = m, width = 0;
+        auto add = [&](int q) {
+          if (mark[q] != k) {
+            mark[q] = k;
+            sk.push_back(q);
+            first = std::min(first, q);
+            width += dims_[topVars[ord[q]]];
+          }
+        };
+        for (int r = homeHead[k]; r >= 0; r = homeNext[r])
+          for (int i = rowPtr[r]; i < rowPtr[r + 1]; ++i) add(pos[rowCol[i]]);
+        for (int c = childHead[k]; c >= 0; c = childNext[c]) {
+          for (int q : st[c]) add(q);
+          std::vector<int>().swap(st[c]);
+        }
+        const double d = dims_[topVars[ord[k]]];
+        cost += d * (d + width) * (d + width);
+        if (first < m) {
+          childNext[k] = childHead[first];
+          childHead[first] = k;
+        }
+      }
+      return cost;
+    };
+    // Groups: the variables of the new factors last (they form the new root, so the next
+    // update stays small); with recencyGrouping, variables no new factor has touched for
+    // that many updates first, so they sink below the part of the tree that updates keep
+    // visiting instead of staying on its path to the root — kept only if it costs little
+    // more fill than the plain order.
     std::vector<int> cmember(m, 0);
-    bool anyConstrained = false, allConstrained = true;
+    bool anyConstrained = false, allConstrained = true, anyOld = false, anyRecent = false;
     for (int i = 0; i < m; ++i) {
       const bool c = constrainedStamp_[topVars[i]] == epoch_;
       cmember[i] = c ? 1 : 0;
       anyConstrained |= c;
       allConstrained &= c;
+      if (!c) {
+        const bool old = updateCount_ - touched_[topVars[i]] > isam_.recencyGrouping;
+        (old ? anyOld : anyRecent) = true;
+      }
     }
-    double knobs[CCOLAMD_KNOBS];
-    int statsOut[CCOLAMD_STATS];
-    ccolamd_set_defaults(knobs);
-    const bool ok = ccolamd(nrow, m, static_cast<int>(alen), A.data(), p.data(), knobs, statsOut,
-                            (anyConstrained && !allConstrained) ? cmember.data() : nullptr);
-    if (ok) {
-      for (int k = 0; k < m; ++k) order[k] = p[k];
-    } else {
+    const bool twoGroups = anyConstrained && !allConstrained;
+    bool ok = runCcolamd(twoGroups ? cmember.data() : nullptr, order);
+    if (ok && isam_.recencyGrouping > 0 && anyOld && anyRecent) {
+      std::vector<int> grouped(m, 0), alt;
+      for (int i = 0; i < m; ++i)
+        grouped[i] = cmember[i] ? 2
+                                : (updateCount_ - touched_[topVars[i]] > isam_.recencyGrouping ? 0 : 1);
+      if (!anyConstrained)
+        for (int& g : grouped) g = std::min(g, 1);
+      if (runCcolamd(grouped.data(), alt) &&
+          eliminationCost(alt) <= isam_.recencyFillTolerance * eliminationCost(order))
+        order.swap(alt);
+    }
+    if (!ok)
       for (int k = 0; k < m; ++k) order[k] = k;
-    }
   }
   std::vector<int> ov(m);  // variable at each position
   for (int k = 0; k < m; ++k) ov[k] = topVars[order[k]];
@@ -412,7 +486,9 @@ void Isam2Backend::recompute() {
   //    is exactly that clique's variables.
   std::vector<int> cliqueAt(m, -1), created;
   std::vector<int> firstFrontal;  // per created clique (index in `created`)
-  std::vector<int> createdIndex;  // clique id → index in created (sized lazily)
+  // clique id → index in created: a member kept all −1 between updates (a per-update vector
+  // the size of the tree would cost O(n) per update).
+  std::vector<int>& createdIndex = createdIndex_;
   for (int k = m - 1; k >= 0; --k) {
     const int p = etParent[k];
     if (p >= 0) {
@@ -427,7 +503,7 @@ void Isam2Backend::recompute() {
       }
     }
     const int c = newClique();
-    if (static_cast<int>(createdIndex.size()) <= c) createdIndex.resize(cliques_.size(), -1);
+    if (createdIndex.size() < cliques_.size()) createdIndex.resize(cliques_.size(), -1);
     createdIndex[c] = static_cast<int>(created.size());
     created.push_back(c);
     firstFrontal.push_back(k);
@@ -437,6 +513,7 @@ void Isam2Backend::recompute() {
     C.parent = p >= 0 ? cliqueAt[p] : -1;
     cliqueAt[k] = c;
   }
+  for (int c : created) createdIndex[c] = -1;
   for (size_t i = 0; i < created.size(); ++i) {
     const int c = created[i];
     Clique& C = cliques_[c];

@@ -22,6 +22,11 @@ struct Isam2Options {
   double relinearizeThreshold = 0.1;  // β: max |Δ| component (rad or m) before relinearizing
   int relinearizeSkip = 10;           // check for relinearization every k-th update (GTSAM's default)
   double wildfireThreshold = 0.001;   // α: descend into a subtree if a separator Δ moved more
+  // Ordering of the top: variables that no new factor touched for this many updates are
+  // eliminated first (0: off), if that costs at most recencyFillTolerance × the fill of the
+  // plain order (new factors' variables last). Keeps old variables off the root path.
+  long recencyGrouping = 300;
+  double recencyFillTolerance = 1.5;
   double gaugeInformation = 1e8;      // internal prior on the first pose when no prior exists
   int maxFinalIterations = 30;        // optimize(): full relinearizations at most
   double finalRelativeTolerance = 1e-10;  // optimize(): stop when chi2 improves less
@@ -157,6 +162,7 @@ class Isam2Backend : public Backend {
   std::vector<int> localIdx_;    // per-variable scratch (index in one clique), −1 when free
   std::vector<long> constrainedStamp_;
   std::vector<long> movedStamp_;
+  std::vector<long> touched_;  // update count when a new factor last involved the variable
   int firstPose_ = -1;
   int newestVar_ = -1;
 
@@ -180,6 +186,7 @@ class Isam2Backend : public Backend {
   std::vector<int> affected_;
   std::vector<int> constrained_;
   std::vector<int> newRoots_;
+  std::vector<int> createdIndex_;  // recompute(): clique → index among the new cliques, −1
   std::vector<double> scratch_;
 };
 
