@@ -2,6 +2,7 @@
 
 #include <lcm/lcm-cpp.hpp>
 #include <chrono>
+#include <cmath>
 #include <stdexcept>
 
 namespace loopd::client {
@@ -122,8 +123,89 @@ std::int64_t FactorPublisher::prior(KeyRef pose, const Pose3& z, const Eigen::Ma
   return factor(make(F::PRIOR_SE3, F::ROLE_PRIOR, {pose}, pose3(z), info.data(), 6, id));
 }
 
+namespace {
+loopd::factor_t plain(std::int8_t type, std::int8_t role, std::vector<KeyRef> keys,
+                      std::vector<double> measurement, const double* info, int dim) {
+  loopd::factor_t f{};
+  f.id = 0;
+  f.type = type;
+  f.role = role;
+  for (const auto& k : keys) f.keys.push_back(wireKey(k));
+  f.num_keys = static_cast<std::int16_t>(f.keys.size());
+  f.measurement = std::move(measurement);
+  f.num_measurement = static_cast<std::int16_t>(f.measurement.size());
+  f.noise_kind = F::NOISE_INFORMATION;
+  f.noise = upperTriangle(info, dim);
+  f.num_noise = static_cast<std::int16_t>(f.noise.size());
+  f.robust = "";
+  f.robust_param = 0.0;
+  return f;
+}
+
+bool sameKeys(const loopd::factor_t& a, const loopd::factor_t& b) {
+  if (a.keys.size() != b.keys.size()) return false;
+  for (size_t i = 0; i < a.keys.size(); ++i)
+    if (a.keys[i].robot != b.keys[i].robot || a.keys[i].kind != b.keys[i].kind ||
+        a.keys[i].index != b.keys[i].index)
+      return false;
+  return true;
+}
+
+// The server's rules for an ambiguous group that need no graph (lcmtypes/README.md).
+void checkAmbiguous(std::int8_t mode, const std::vector<loopd::factor_t>& alts, bool null,
+                    double nullWeight) {
+  using A = loopd::ambiguous_factor_t;
+  auto fail = [](const std::string& why) { throw std::invalid_argument("ambiguous: " + why); };
+  if (mode != A::MULTI_MEASUREMENT && mode != A::MULTI_ASSOCIATION) fail("unknown mode");
+  const size_t k = alts.size();
+  if (k > static_cast<size_t>(A::MAX_ALTERNATIVES)) fail("more than 16 alternatives");
+  if (k < (null ? 1u : 2u)) fail("needs 2 alternatives, or 1 with a null hypothesis");
+  if (!std::isfinite(nullWeight) || nullWeight < 0.0) fail("null weight must be finite and >= 0");
+  for (size_t i = 0; i < k; ++i) {
+    const auto& f = alts[i];
+    if (f.role != F::ROLE_LOOP_CLOSURE && f.role != F::ROLE_LANDMARK)
+      fail("alternatives must be loop closures or landmark sightings");
+    if (f.type != alts[0].type || f.role != alts[0].role)
+      fail("all alternatives must have one type and role");
+    if (f.keys.size() == 2 && f.keys[0].robot != f.keys[1].robot)
+      fail("inter-robot alternatives are not supported");
+    if (i == 0) continue;
+    if (mode == A::MULTI_MEASUREMENT && !sameKeys(f, alts[0]))
+      fail("MULTI_MEASUREMENT alternatives must have the same keys");
+    if (mode == A::MULTI_ASSOCIATION) {
+      if (f.measurement != alts[0].measurement || f.noise_kind != alts[0].noise_kind ||
+          f.noise != alts[0].noise)
+        fail("MULTI_ASSOCIATION alternatives must have the same measurement and noise");
+      for (size_t j = 0; j < i; ++j)
+        if (sameKeys(f, alts[j])) fail("MULTI_ASSOCIATION alternatives must differ in their keys");
+    }
+  }
+}
+}  // namespace
+
+loopd::factor_t loopClosureFactor(KeyRef a, KeyRef b, const Pose2& z, const Eigen::Matrix3d& info) {
+  return plain(F::BETWEEN_SE2, F::ROLE_LOOP_CLOSURE, {a, b}, {z.x, z.y, z.theta}, info.data(), 3);
+}
+loopd::factor_t loopClosureFactor(KeyRef a, KeyRef b, const Pose3& z,
+                                  const Eigen::Matrix<double, 6, 6>& info) {
+  return plain(F::BETWEEN_SE3, F::ROLE_LOOP_CLOSURE, {a, b}, pose3(z), info.data(), 6);
+}
+loopd::factor_t landmarkFactor(KeyRef pose, KeyRef point, const Eigen::Vector2d& z,
+                               const Eigen::Matrix2d& info) {
+  return plain(F::POSE_POINT2, F::ROLE_LANDMARK, {pose, point}, {z.x(), z.y()}, info.data(), 2);
+}
+loopd::factor_t landmarkFactor(KeyRef pose, KeyRef point, const Eigen::Vector3d& z,
+                               const Eigen::Matrix3d& info) {
+  return plain(F::POSE_POINT3, F::ROLE_LANDMARK, {pose, point}, {z.x(), z.y(), z.z()}, info.data(), 3);
+}
+loopd::factor_t bearingRangeFactor(KeyRef pose, KeyRef point, double bearing, double range,
+                                   const Eigen::Matrix2d& info) {
+  return plain(F::BEARING_RANGE2, F::ROLE_LANDMARK, {pose, point}, {bearing, range}, info.data(), 2);
+}
+
 std::int64_t FactorPublisher::ambiguous(std::int8_t mode, const std::vector<loopd::factor_t>& alternatives,
                                         bool nullHypothesis, double nullWeight, std::int64_t id) {
+  checkAmbiguous(mode, alternatives, nullHypothesis, nullWeight);
   const int n = static_cast<int>(alternatives.size());
   if (items_ + n > loopd::factor_batch_t::MAX_ITEMS) flush();
   loopd::ambiguous_factor_t a{};

@@ -65,7 +65,12 @@ class FactorPublisher {
   std::int64_t prior(KeyRef pose, const Pose2& z, const Eigen::Matrix3d& information, std::int64_t id = -1);
   std::int64_t prior(KeyRef pose, const Pose3& z, const Eigen::Matrix<double, 6, 6>& information,
                      std::int64_t id = -1);
-  /// k alternatives, at most one true (MULTI_MEASUREMENT / MULTI_ASSOCIATION).
+  /// k alternatives, at most one true (MULTI_MEASUREMENT: same keys, own measurements;
+  /// MULTI_ASSOCIATION: same measurement and noise, own keys), built with loopClosureFactor /
+  /// landmarkFactor / bearingRangeFactor; their ids are ignored. 2 <= k <= 16, or k >= 1 with
+  /// a null hypothesis; nullWeight >= 0 (0 = the server's default, 1). Throws
+  /// std::invalid_argument on anything the server would refuse without looking at its graph
+  /// (except the factors' own numbers: NaN, non-positive-definite noise, ...).
   std::int64_t ambiguous(std::int8_t mode, const std::vector<loopd::factor_t>& alternatives,
                          bool nullHypothesis, double nullWeight = 0.0, std::int64_t id = -1);
   /// Any factor as built by hand; its id is assigned if negative.
@@ -103,6 +108,17 @@ class FactorPublisher {
   std::int64_t sequence_ = 0, nextId_ = 0, published_ = 0;
   int items_ = 0;
 };
+
+/// Factors to pass to FactorPublisher::ambiguous (nothing is queued; id 0).
+loopd::factor_t loopClosureFactor(KeyRef a, KeyRef b, const Pose2& z, const Eigen::Matrix3d& information);
+loopd::factor_t loopClosureFactor(KeyRef a, KeyRef b, const Pose3& z,
+                                  const Eigen::Matrix<double, 6, 6>& information);
+loopd::factor_t landmarkFactor(KeyRef pose, KeyRef point, const Eigen::Vector2d& z,
+                               const Eigen::Matrix2d& information);
+loopd::factor_t landmarkFactor(KeyRef pose, KeyRef point, const Eigen::Vector3d& z,
+                               const Eigen::Matrix3d& information);
+loopd::factor_t bearingRangeFactor(KeyRef pose, KeyRef point, double bearing, double range,
+                                   const Eigen::Matrix2d& information);
 
 /// Encodes the upper triangle (row-major, g2o order) of a symmetric matrix.
 std::vector<double> upperTriangle(const double* colMajor, int dim);

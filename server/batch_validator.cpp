@@ -146,6 +146,85 @@ void FactorBatchValidator::checkFactor(const F& f, std::int64_t reportId,
     bad(E::INVALID_FIELD, "robust_param " + num(f.robust_param) + " must be finite and >= 0");
 }
 
+void FactorBatchValidator::checkAmbiguous(const loopd::ambiguous_factor_t& a,
+                                          std::vector<Issue>& out) const {
+  using A = loopd::ambiguous_factor_t;
+  const std::string name = "ambiguous " + std::to_string(a.id);
+  auto bad = [&](std::int8_t code, const std::string& why) {
+    out.push_back({a.id, code, name + ": " + why});
+  };
+  if (a.mode != A::MULTI_MEASUREMENT && a.mode != A::MULTI_ASSOCIATION)
+    bad(E::INVALID_FIELD, "unknown mode " + std::to_string(a.mode) +
+                              " (MULTI_MEASUREMENT = 1, MULTI_ASSOCIATION = 2)");
+  if (a.num_alternatives < 0 || static_cast<size_t>(a.num_alternatives) != a.alternatives.size()) {
+    bad(E::DECODE_FAILED, "num_alternatives does not match its contents");
+    return;
+  }
+  const int k = a.num_alternatives;
+  if (k > A::MAX_ALTERNATIVES)
+    bad(E::LIMIT_EXCEEDED, std::to_string(k) + " alternatives, at most " +
+                               std::to_string(A::MAX_ALTERNATIVES));
+  if (k < (a.null_hypothesis ? 1 : 2))
+    bad(E::INVALID_FIELD, std::to_string(k) + " alternative(s): need at least 2, or 1 with " +
+                              "null_hypothesis (otherwise send a factor_t)");
+  if (!std::isfinite(a.null_weight))
+    bad(E::NON_FINITE, "null_weight is NaN or Inf");
+  else if (a.null_weight < 0.0)
+    bad(E::INVALID_FIELD, "null_weight " + num(a.null_weight) + " must be >= 0 (0 = default 1)");
+  const size_t before = out.size();
+  for (int i = 0; i < k; ++i) {
+    const F& f = a.alternatives[static_cast<size_t>(i)];
+    std::vector<Issue> one;
+    checkFactor(f, a.id, one);
+    for (Issue& is : one) {
+      is.reason = name + " alternative " + std::to_string(i) + ": " + is.reason;
+      out.push_back(std::move(is));
+    }
+    if (!one.empty()) continue;
+    if (f.role != F::ROLE_LOOP_CLOSURE && f.role != F::ROLE_LANDMARK)
+      bad(E::INVALID_FIELD, "alternative " + std::to_string(i) +
+                                ": role must be ROLE_LOOP_CLOSURE or ROLE_LANDMARK");
+    if (f.num_keys == 2 && f.keys[0].robot != f.keys[1].robot)
+      bad(E::INVALID_FIELD, "alternative " + std::to_string(i) + " joins robots " +
+                                std::to_string(f.keys[0].robot) + " and " +
+                                std::to_string(f.keys[1].robot) +
+                                ": inter-robot alternatives are not supported yet");
+  }
+  if (out.size() != before || k < 1 || k > A::MAX_ALTERNATIVES) return;
+  // Every alternative well-formed: the group's own rules.
+  const F& f0 = a.alternatives.front();
+  auto sameKeys = [](const F& x, const F& y) {
+    if (x.keys.size() != y.keys.size()) return false;
+    for (size_t j = 0; j < x.keys.size(); ++j)
+      if (x.keys[j].robot != y.keys[j].robot || x.keys[j].kind != y.keys[j].kind ||
+          x.keys[j].index != y.keys[j].index)
+        return false;
+    return true;
+  };
+  for (int i = 1; i < k; ++i) {
+    const F& f = a.alternatives[static_cast<size_t>(i)];
+    const std::string alt = "alternative " + std::to_string(i);
+    if (f.type != f0.type || f.role != f0.role) {
+      bad(E::INVALID_FIELD, alt + " is " + factorTypeName(f.type) + " role " +
+                                std::to_string(f.role) + ", alternative 0 " +
+                                factorTypeName(f0.type) + " role " + std::to_string(f0.role) +
+                                ": all alternatives have one type and role");
+      continue;
+    }
+    if (a.mode == A::MULTI_MEASUREMENT && !sameKeys(f, f0))
+      bad(E::INVALID_FIELD, alt + ": MULTI_MEASUREMENT needs the same keys in every alternative");
+    if (a.mode == A::MULTI_ASSOCIATION) {
+      if (f.measurement != f0.measurement || f.noise_kind != f0.noise_kind || f.noise != f0.noise)
+        bad(E::INVALID_FIELD,
+            alt + ": MULTI_ASSOCIATION needs the same measurement and noise in every alternative");
+      for (int j = 0; j < i; ++j)
+        if (sameKeys(f, a.alternatives[static_cast<size_t>(j)]))
+          bad(E::INVALID_FIELD, alt + " has the same keys as alternative " + std::to_string(j) +
+                                    ": MULTI_ASSOCIATION alternatives differ in their keys");
+    }
+  }
+}
+
 std::vector<Issue> FactorBatchValidator::check(const B& b) const {
   std::vector<Issue> out;
   auto whole = [&](std::int8_t code, const std::string& why) { out.push_back({-1, code, why}); };
@@ -182,20 +261,7 @@ std::vector<Issue> FactorBatchValidator::check(const B& b) const {
   }
   for (const auto& a : b.ambiguous) {
     checkId(a.id);
-    const std::string name = "ambiguous " + std::to_string(a.id);
-    if (!acceptAmbiguous) {
-      out.push_back({a.id, E::INVALID_FIELD,
-                     name + ": ambiguous measurements need a multi-hypothesis solver (mh), not active"});
-      continue;
-    }
-    if (a.mode != loopd::ambiguous_factor_t::MULTI_MEASUREMENT &&
-        a.mode != loopd::ambiguous_factor_t::MULTI_ASSOCIATION)
-      out.push_back({a.id, E::INVALID_FIELD, name + ": unknown mode " + std::to_string(a.mode)});
-    if (a.num_alternatives > loopd::ambiguous_factor_t::MAX_ALTERNATIVES)
-      out.push_back({a.id, E::LIMIT_EXCEEDED, name + ": more than 16 alternatives"});
-    if (a.num_alternatives < (a.null_hypothesis ? 1 : 2))
-      out.push_back({a.id, E::INVALID_FIELD, name + ": too few alternatives"});
-    for (const auto& f : a.alternatives) checkFactor(f, a.id, out);
+    checkAmbiguous(a, out);
   }
   for (const auto& v : b.initial_values) {
     std::string why;
@@ -283,6 +349,11 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
     for (int i = 0; i < f.num_keys; ++i)
       use(toKey(f.keys[static_cast<size_t>(i)]), slotVarType(f.type, i), f.id,
           itemName(f, f.id));
+  for (const auto& a : b.ambiguous)
+    for (const auto& f : a.alternatives)
+      for (int i = 0; i < f.num_keys; ++i)
+        use(toKey(f.keys[static_cast<size_t>(i)]), slotVarType(f.type, i), a.id,
+            "ambiguous " + std::to_string(a.id) + " " + itemName(f, a.id));
   for (const auto& v : b.initial_values) {
     const VarType t = v.type == loopd::initial_value_t::SE2   ? VarType::SE2
                       : v.type == loopd::initial_value_t::SE3 ? VarType::SE3

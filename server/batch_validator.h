@@ -40,11 +40,11 @@ class FactorBatchValidator {
   std::vector<Issue> check(const loopd::factor_batch_t& batch) const;
   /// Checks of one factor (also used for ambiguous alternatives).
   void checkFactor(const loopd::factor_t& f, std::int64_t reportId, std::vector<Issue>& out) const;
+  /// Checks of one ambiguous group: mode, number of alternatives, null weight, every
+  /// alternative as a factor, and the mode's rules (same keys / same measurement and noise).
+  void checkAmbiguous(const loopd::ambiguous_factor_t& a, std::vector<Issue>& out) const;
   /// Checks against the graph: ids, removals, variable types. Run after check() passed.
   std::vector<Issue> checkContext(const loopd::factor_batch_t& batch, const GraphView& graph) const;
-
-  /// Ambiguous groups are refused until a multi-hypothesis solver is active.
-  bool acceptAmbiguous = false;
 };
 
 /// "sender 'robot1' seq 12: factor 43: reason" for logs.

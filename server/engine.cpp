@@ -12,7 +12,9 @@
 #include "loopd/error_t.hpp"
 #include "loopd/estimate_t.hpp"
 #include "loopd/status_t.hpp"
+#include "robust/ambiguous_choice.h"
 #include "robust/backend_registry.h"
+#include "robust/mh_backend.h"
 #include "server/anchored_between_factor.h"
 #include "server/wire.h"
 #include "solvers/factors/landmark_factors.h"
@@ -112,12 +114,17 @@ SE3 se3Of(const Values& v, Key k) { return v.se3(v.slot(k)); }
 
 Engine::Engine(EngineOptions options, Publisher& publisher, Journal* journal)
     : opt_(std::move(options)), pub_(publisher), journal_(journal) {
-  BackendOptions bo;
-  backend_ = makeBackend(opt_.solver, bo);
+  backend_ = makeBackend(opt_.solver, backendOptions());
   lastInput_ = lastStatus_ = Clock::now();
 }
 
 Engine::~Engine() = default;
+
+BackendOptions Engine::backendOptions() const {
+  BackendOptions bo;
+  bo.maxHypotheses = opt_.maxHypotheses;
+  return bo;
+}
 
 EngineCounters Engine::counters() const {
   std::lock_guard<std::mutex> l(countersMu_);
@@ -365,9 +372,19 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     for (const auto& k : f.keys) keys.push_back(toKey(k));
   std::sort(keys.begin(), keys.end());
   keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  // Keys of ambiguous alternatives: they must exist (or come with the batch's factors); they
+  // never introduce or initialise a variable.
+  std::vector<Key> altKeys;
+  for (const auto& a : b.ambiguous)
+    for (const auto& f : a.alternatives)
+      for (const auto& k : f.keys) altKeys.push_back(toKey(k));
+  std::sort(altKeys.begin(), altKeys.end());
+  altKeys.erase(std::unique(altKeys.begin(), altKeys.end()), altKeys.end());
   Values knownVals, guess;
   for (Key k : keys)
     if (const Values* h = holder(k)) knownVals.insertFrom(*h, h->slot(k));
+  for (Key k : altKeys)
+    if (const Values* h = holder(k); h && !knownVals.contains(k)) knownVals.insertFrom(*h, h->slot(k));
   for (const auto& v : b.initial_values) {
     const Key k = toKey(v.key);
     if (known(k) || guess.contains(k) || !std::binary_search(keys.begin(), keys.end(), k)) continue;
@@ -413,6 +430,8 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   }
   predictMissingValues(intra, knownVals, guess);
   for (Key k : keys)
+    if (!knownVals.contains(k) && !guess.contains(k)) waiting.push_back(k);
+  for (Key k : altKeys)
     if (!knownVals.contains(k) && !guess.contains(k)) waiting.push_back(k);
   if (!waiting.empty()) return StageResult::Hold;
 
@@ -483,9 +502,29 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     sessions_.addId(b.sender, wf.id, id);
     st.addedIds.emplace_back(wf.id, id);
   }
+  // Ambiguous groups: each alternative is built like a factor_t and gets an internal id of
+  // its own; the group's internal id is what the sender's id maps to.
+  for (const auto& wa : b.ambiguous) {
+    Group g;
+    g.sender = b.sender;
+    g.id = wa.id;
+    g.factor.id = newFactorId();
+    g.factor.nullHypothesis = wa.null_hypothesis;
+    g.factor.nullWeight = wa.null_hypothesis && wa.null_weight > 0.0 ? wa.null_weight : 1.0;
+    for (const auto& wf : wa.alternatives) {
+      std::shared_ptr<Factor> f = buildFactor(wf);
+      f->setId(newFactorId());
+      g.factor.alternatives.push_back(std::move(f));
+    }
+    u.ambiguous.push_back(g.factor);
+    sessions_.addId(b.sender, wa.id, g.factor.id);
+    st.addedIds.emplace_back(wa.id, g.factor.id);
+    st.groups.push_back(std::move(g));
+  }
   for (std::int64_t rid : b.remove_ids) {
     const FactorId fid = sessions_.removeId(b.sender, rid);
-    u.removals.push_back(fid);
+    if (isGroupId(fid)) st.groupRemovals.push_back(fid);
+    else u.removals.push_back(fid);
     st.removedIds.emplace_back(rid, fid);
   }
   // Server-owned factors got ids after the sender's: give them theirs now.
@@ -494,6 +533,14 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
       std::const_pointer_cast<Factor>(u.factors[i])->setId(newFactorId());
   staged_.push_back(std::move(st));
   return StageResult::Staged;
+}
+
+bool Engine::isGroupId(FactorId id) const {
+  if (groups_.count(id)) return true;
+  for (const Staged& s : staged_)
+    for (const Group& g : s.groups)
+      if (g.factor.id == id) return true;
+  return false;
 }
 
 FactorPtr Engine::priorAt(Key k, const Values& from, int slot, double information) {
@@ -648,6 +695,11 @@ void Engine::commit(Staged& s) {
       if (s.owners[i].uncertain) ++loopClosures_;
     }
   }
+  for (const Group& g : s.groups) groups_[g.factor.id] = g;
+  for (FactorId r : s.groupRemovals) {
+    groups_.erase(r);
+    lastGroupDecisions_.erase(r);
+  }
   std::lock_guard<std::mutex> l(countersMu_);
   ++counters_.accepted;
 }
@@ -665,27 +717,36 @@ void Engine::flush() {
       ++counters_.journaled;
     }
   }
-  // One update for the round; factors removed within the round cancel out.
+  // One update for the round; factors and groups removed within the round cancel out.
   BackendUpdate all;
+  std::vector<FactorId> groupRemovals;
   std::unordered_set<FactorId> added, cancelled;
-  for (auto& s : staged_)
+  for (auto& s : staged_) {
     for (const auto& f : s.update.factors) added.insert(f->id());
-  for (auto& s : staged_)
+    for (const auto& a : s.update.ambiguous) added.insert(a.id);
+  }
+  for (auto& s : staged_) {
     for (FactorId r : s.update.removals)
       if (added.count(r)) cancelled.insert(r);
+    for (FactorId r : s.groupRemovals)
+      if (added.count(r)) cancelled.insert(r);
+  }
   for (auto& s : staged_) {
     for (const auto& f : s.update.factors)
       if (!cancelled.count(f->id())) all.factors.push_back(f);
+    for (const auto& a : s.update.ambiguous)
+      if (!cancelled.count(a.id)) all.ambiguous.push_back(a);
     for (int i = 0; i < s.update.initial.size(); ++i) all.initial.insertFrom(s.update.initial, i);
     for (FactorId r : s.update.removals)
       if (!cancelled.count(r)) all.removals.push_back(r);
+    for (FactorId r : s.groupRemovals)
+      if (!cancelled.count(r)) groupRemovals.push_back(r);
   }
   const auto t0 = Clock::now();
   std::vector<Key> moved;
   bool ok = true;
   try {
-    if (!all.factors.empty() || !all.removals.empty()) moved = backend_->update(all).moved;
-    moved.insert(moved.end(), all.initial.keys().begin(), all.initial.keys().end());
+    moved = applyUpdate(all, groupRemovals);
   } catch (const std::exception& e) {
     ok = false;
     spdlog::error("update of {} batches failed ({}); applying them one by one", staged_.size(), e.what());
@@ -709,8 +770,7 @@ void Engine::flush() {
       staged_.clear();
       stagedValues_ = Values();
       try {
-        for (Key k : backend_->update(one.update).moved) movedSet.insert(k);
-        for (Key k : one.update.initial.keys()) movedSet.insert(k);
+        for (Key k : applyUpdate(one.update, one.groupRemovals)) movedSet.insert(k);
         commit(one);
       } catch (const std::exception& e) {
         undo(one);
@@ -736,6 +796,43 @@ void Engine::flush() {
   }
 }
 
+std::vector<Key> Engine::applyUpdate(BackendUpdate u, const std::vector<FactorId>& groupRemovals) {
+  std::vector<Key> moved;
+  const std::vector<Key> newKeys = u.initial.keys();
+  if (!groupRemovals.empty() && backend_->handlesAmbiguous()) {
+    // mh cannot drop a layer of its hypothesis tree: a new backend gets the graph without it
+    // (cost: a rebuild of everything).
+    const std::unordered_set<FactorId> gone(groupRemovals.begin(), groupRemovals.end());
+    const std::unordered_set<FactorId> removed(u.removals.begin(), u.removals.end());
+    std::unique_ptr<Backend> next = makeBackend(backend_->name(), backendOptions());
+    BackendUpdate full;
+    for (const auto& [id, f] : live_)
+      if (!removed.count(id)) full.factors.push_back(f);
+    full.factors.insert(full.factors.end(), u.factors.begin(), u.factors.end());
+    for (const auto& [id, g] : groups_)
+      if (!gone.count(id)) full.ambiguous.push_back(g.factor);
+    full.ambiguous.insert(full.ambiguous.end(), u.ambiguous.begin(), u.ambiguous.end());
+    full.initial = backend_->estimate();
+    for (int i = 0; i < u.initial.size(); ++i)
+      if (!full.initial.contains(u.initial.key(i))) full.initial.insertFrom(u.initial, i);
+    feedRebuilt(*next, std::move(full));
+    backend_ = std::move(next);
+    lastDecisions_.clear();
+    lastGroupDecisions_.clear();
+    return backend_->estimate().keys();
+  }
+  for (FactorId r : groupRemovals) {  // flattened: the alternatives are ordinary factors
+    const auto it = groups_.find(r);
+    if (it == groups_.end()) throw std::logic_error("removal of an unknown ambiguous group");
+    for (const auto& f : it->second.factor.alternatives) u.removals.push_back(f->id());
+  }
+  if (!backend_->handlesAmbiguous()) flattenAmbiguous(u);
+  if (!u.factors.empty() || !u.removals.empty() || !u.ambiguous.empty())
+    moved = backend_->update(u).moved;
+  moved.insert(moved.end(), newKeys.begin(), newKeys.end());
+  return moved;
+}
+
 // --- publishing -------------------------------------------------------------------------
 
 void Engine::afterUpdate(const std::vector<Key>& moved, double seconds, bool optimizeRun) {
@@ -759,8 +856,9 @@ void Engine::afterUpdate(const std::vector<Key>& moved, double seconds, bool opt
   publishStatus(0, false);
 }
 
-void Engine::publishEstimates(const std::vector<Key>* moved, std::int64_t requestId, int onlyRobot) {
-  const Values& est = backend_->estimate();
+void Engine::publishEstimates(const std::vector<Key>* moved, std::int64_t requestId, int onlyRobot,
+                              const Values* values, int hypothesis) {
+  const Values& est = values ? *values : backend_->estimate();
   // Which robots to publish fully (snapshot, or their anchor moved) and which keys otherwise.
   std::map<std::uint32_t, std::vector<Key>> keysOf;
   std::set<std::uint32_t> full;
@@ -783,6 +881,7 @@ void Engine::publishEstimates(const std::vector<Key>* moved, std::int64_t reques
     auto rit = robots_.find(r);
     RobotEstimate e;
     e.robot = static_cast<std::int32_t>(r);
+    e.hypothesis = hypothesis;
     e.fullSnapshot = full.count(r) > 0 && !moved ? true : full.count(r) > 0;
     e.se3 = rit != robots_.end() && rit->second.poseType == VarType::SE3;
     const bool anchored = rit != robots_.end() && rit->second.anchored && est.contains(anchorKey(r));
@@ -936,13 +1035,65 @@ std::vector<loopd::loop_decision_t> Engine::decisionList(bool full) {
     }
     if (changed) lastDecisions_[fid] = w;
   }
+  // Ambiguous groups: the best hypothesis's choice (other variants: the alternative their
+  // decisions favour). weight: mh, the share of live hypotheses making that choice (1 =
+  // settled); others, the chosen alternative's decision weight (0 for none).
+  if (!groups_.empty()) {
+    std::vector<AmbiguousFactor> ms;
+    ms.reserve(groups_.size());
+    for (const auto& [gid, g] : groups_) ms.push_back(g.factor);
+    const std::vector<int> chosen = chosenAlternatives(*backend_, ms);
+    std::vector<double> share(ms.size(), 1.0);
+    if (const auto* mh = dynamic_cast<const MhBackend*>(backend_.get())) {
+      const auto hyps = mh->hypotheses(mh->liveHypotheses());
+      for (size_t l = 0; l < ms.size(); ++l) {
+        int agree = 0, n = 0;
+        for (const auto& h : hyps)
+          if (l < h.choices.size()) {
+            ++n;
+            agree += h.choices[l] == chosen[l];
+          }
+        share[l] = n > 0 ? static_cast<double>(agree) / n : 1.0;
+      }
+    } else {
+      std::unordered_map<FactorId, double> w;
+      for (const auto& [id, x] : backend_->decisions()) w[id] = x;
+      for (size_t l = 0; l < ms.size(); ++l) {
+        if (chosen[l] < 0) {
+          share[l] = 0.0;
+          continue;
+        }
+        const auto it = w.find(ms[l].alternatives[static_cast<size_t>(chosen[l])]->id());
+        share[l] = it == w.end() ? 1.0 : it->second;
+      }
+    }
+    size_t l = 0;
+    for (const auto& [gid, g] : groups_) {
+      const std::pair<int, double> d{chosen[l], share[l]};
+      ++l;
+      auto old = lastGroupDecisions_.find(gid);
+      const bool changed = old == lastGroupDecisions_.end() || old->second.first != d.first ||
+                           std::abs(old->second.second - d.second) > 1e-3;
+      if (full || changed) {
+        loopd::loop_decision_t x{};
+        x.sender = g.sender;
+        x.factor_id = g.id;
+        x.ambiguous = true;
+        x.alternative = d.first;
+        x.accepted = d.first >= 0;
+        x.weight = d.second;
+        out.push_back(x);
+      }
+      if (changed) lastGroupDecisions_[gid] = d;
+    }
+  }
   std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) {
     return a.sender != b.sender ? a.sender < b.sender : a.factor_id < b.factor_id;
   });
   return out;
 }
 
-void Engine::publishStatus(std::int64_t requestId, bool fullDecisions) {
+void Engine::publishStatus(std::int64_t requestId, bool fullDecisions, int hypotheses) {
   lastStatus_ = Clock::now();
   loopd::status_t s{};
   s.update_seq = updateSeq_;
@@ -958,7 +1109,11 @@ void Engine::publishStatus(std::int64_t requestId, bool fullDecisions) {
   }
   s.factors = static_cast<std::int64_t>(live_.size());
   s.loop_closures = loopClosures_;
-  s.loop_closures_rejected = static_cast<std::int64_t>(backend_->rejected().size());
+  for (FactorId id : backend_->rejected()) {
+    const auto it = owners_.find(id);  // the sender's own loop closures (not alternatives)
+    s.loop_closures_rejected += it != owners_.end() && it->second.uncertain ? 1 : 0;
+  }
+  s.ambiguous = static_cast<std::int64_t>(groups_.size());
   s.last_update_ms = lastUpdateMs_;
   const EngineCounters c = counters();
   s.mean_update_ms = c.updates > 0 ? sumUpdateMs_ / static_cast<double>(c.updates) : 0.0;
@@ -985,6 +1140,39 @@ void Engine::publishStatus(std::int64_t requestId, bool fullDecisions) {
   s.decisions_full = fullDecisions;
   s.live_hypotheses = 1;
   s.undecided_ambiguous = 0;
+  if (const auto* mh = dynamic_cast<const MhBackend*>(backend_.get())) {
+    s.live_hypotheses = mh->liveHypotheses();
+    const auto hyps = mh->hypotheses(mh->liveHypotheses());
+    // Layers are the groups in arrival order (= ascending internal id, as fed to the backend).
+    std::vector<const Group*> layer;
+    for (const auto& [gid, g] : groups_) layer.push_back(&g);
+    std::vector<size_t> undecided;  // layers the live hypotheses disagree on
+    for (size_t l = 0; l < layer.size(); ++l) {
+      bool differ = false;
+      for (const auto& h : hyps)
+        differ |= l >= h.choices.size() || h.choices[l] != hyps.front().choices[l];
+      if (differ) undecided.push_back(l);
+    }
+    s.undecided_ambiguous = static_cast<std::int32_t>(undecided.size());
+    const int top = std::min<int>(hypotheses < 0 ? loopd::status_t::MAX_HYPOTHESES : hypotheses,
+                                  loopd::status_t::MAX_HYPOTHESES);
+    for (int r = 0; r < top && r < static_cast<int>(hyps.size()); ++r) {
+      loopd::hypothesis_t h{};
+      h.rank = r;
+      h.score = hyps[static_cast<size_t>(r)].score;
+      for (auto it = undecided.rbegin(); it != undecided.rend(); ++it) {  // newest first
+        if (static_cast<int>(h.choices.size()) >= loopd::hypothesis_t::MAX_CHOICES) break;
+        const auto& c = hyps[static_cast<size_t>(r)].choices;
+        loopd::hypothesis_choice_t x{};
+        x.sender = layer[*it]->sender;
+        x.ambiguous_id = layer[*it]->id;
+        x.alternative = *it < c.size() ? c[*it] : -1;
+        h.choices.push_back(x);
+      }
+      h.num_choices = static_cast<std::int16_t>(h.choices.size());
+      s.hypotheses.push_back(h);
+    }
+  }
   pub_.status(s, decisionList(fullDecisions));
 }
 
@@ -997,24 +1185,46 @@ void Engine::commandError(const loopd::command_t& c, std::int8_t code, const std
   pub_.error(c.sender, 0, c.request_id, -1, code, reason, channel);
 }
 
+void Engine::feedRebuilt(Backend& next, BackendUpdate all) {
+  if (!next.handlesAmbiguous()) {
+    flattenAmbiguous(all);
+    if (!all.factors.empty()) next.update(all);
+    return;
+  }
+  // The hypotheses branch on the optimum of the rest of the graph (as when the groups arrived
+  // one by one), not on an estimate another variant left (flattened decoys drag it).
+  BackendUpdate groups;
+  groups.ambiguous = std::move(all.ambiguous);
+  all.ambiguous.clear();
+  if (!all.factors.empty()) {
+    next.update(all);
+    next.optimize();
+  }
+  if (!groups.ambiguous.empty()) next.update(groups);
+}
+
 void Engine::rebuildBackend(const std::string& solver) {
-  std::unique_ptr<Backend> next = makeBackend(solver, BackendOptions{});
+  std::unique_ptr<Backend> next = makeBackend(solver, backendOptions());
   BackendUpdate all;
   for (const auto& [id, f] : live_) all.factors.push_back(f);
+  for (const auto& [id, g] : groups_) all.ambiguous.push_back(g.factor);  // in arrival order
   all.initial = backend_->estimate();
-  if (!all.factors.empty()) next->update(all);
+  feedRebuilt(*next, std::move(all));
   backend_ = std::move(next);
   lastDecisions_.clear();
+  lastGroupDecisions_.clear();
   dirty_ = true;
 }
 
 void Engine::resetAll() {
-  backend_ = makeBackend(backend_->name(), BackendOptions{});
+  backend_ = makeBackend(backend_->name(), backendOptions());
   sessions_.clear();
   robots_.clear();
   live_.clear();
   owners_.clear();
   lastDecisions_.clear();
+  groups_.clear();
+  lastGroupDecisions_.clear();
   loopClosures_ = 0;
   interEdges_.clear();
   staged_.clear();
@@ -1174,10 +1384,35 @@ void Engine::handleCommand(const Inbound& m) {
         return;
       }
       case C::REQUEST_STATUS: publishStatus(c.request_id, true); return;
-      case C::REQUEST_HYPOTHESES:
-        publishEstimates(nullptr, c.request_id, -1);
-        publishStatus(c.request_id, false);
+      case C::REQUEST_HYPOTHESES: {
+        // Full snapshots of hypotheses rank 0..n−1 (estimate_t.hypothesis = rank), then a
+        // status with the top min(n, MAX_HYPOTHESES) of them. Without mh: rank 0 only.
+        int n = loopd::status_t::MAX_HYPOTHESES;
+        if (!c.argument.empty()) {
+          size_t used = 0;
+          try {
+            n = std::stoi(c.argument, &used);
+          } catch (const std::exception&) {
+            used = 0;
+          }
+          if (used != c.argument.size() || n < 1) {
+            commandError(c, E::COMMAND_FAILED,
+                         "argument must be \"\" or a number of hypotheses >= 1, not '" +
+                             c.argument + "'",
+                         m.channel);
+            return;
+          }
+        }
+        if (const auto* mh = dynamic_cast<const MhBackend*>(backend_.get())) {
+          const auto hyps = mh->hypotheses(n);
+          for (size_t r = 0; r < hyps.size(); ++r)
+            publishEstimates(nullptr, c.request_id, -1, hyps[r].estimate, static_cast<int>(r));
+        } else {
+          publishEstimates(nullptr, c.request_id, -1);
+        }
+        publishStatus(c.request_id, false, n);
         return;
+      }
       default:
         commandError(c, E::INVALID_FIELD, "unknown command " + std::to_string(c.command), m.channel);
         return;

@@ -46,6 +46,7 @@ struct EngineOptions {
   double priorInformation = 1e8;     // first-pose and root-anchor priors
   int maxMessageBytes = 256 * 1024;  // larger messages are refused before decoding
   double heartbeatSeconds = 1.0;
+  int maxHypotheses = 10;            // mh: live hypotheses at most (BackendOptions::maxHypotheses)
 };
 
 struct Inbound {
@@ -102,6 +103,13 @@ class Engine : private GraphView {
     std::int64_t id = 0;
     bool uncertain = false;
   };
+  /// An ambiguous measurement in the graph: its sender's name for it and the backend's form
+  /// (factor.id and every alternative's id are internal FactorIds).
+  struct Group {
+    std::string sender;
+    std::int64_t id = 0;
+    AmbiguousFactor factor;
+  };
   struct Decoded {
     std::shared_ptr<const loopd::factor_batch_t> batch;
     std::shared_ptr<const Inbound> raw;
@@ -114,6 +122,8 @@ class Engine : private GraphView {
     std::vector<std::pair<std::int64_t, FactorId>> addedIds;    // sender ids → FactorIds
     std::vector<std::pair<std::int64_t, FactorId>> removedIds;
     std::vector<Owner> owners;  // parallel to update.factors (sender id −1: server-owned)
+    std::vector<Group> groups;  // parallel to update.ambiguous
+    std::vector<FactorId> groupRemovals;  // internal ids of ambiguous groups removed
   };
   struct Held {
     Decoded d;
@@ -135,6 +145,12 @@ class Engine : private GraphView {
   void expireHolds(bool all);
   void flush();
   void commit(Staged& s);
+  /// Applies a round's update (plain factors, groups, removals of factors and of groups) to the
+  /// backend: flattened for variants without hypotheses; on mh a group removal rebuilds the
+  /// backend from the graph without it. Atomic: throws with the backend unchanged.
+  std::vector<Key> applyUpdate(BackendUpdate update, const std::vector<FactorId>& groupRemovals);
+  bool isGroupId(FactorId id) const;
+  BackendOptions backendOptions() const;
   void undo(Staged& s);
   void reject(const loopd::factor_batch_t& b, const std::vector<Issue>& issues,
               const std::string& channel);
@@ -150,12 +166,16 @@ class Engine : private GraphView {
 
   // publishing
   void afterUpdate(const std::vector<Key>& moved, double seconds, bool optimizeRun);
-  void publishEstimates(const std::vector<Key>* moved, std::int64_t requestId, int onlyRobot);
+  /// `values`: the estimate to publish (default the backend's), `hypothesis`: its rank.
+  void publishEstimates(const std::vector<Key>* moved, std::int64_t requestId, int onlyRobot,
+                        const Values* values = nullptr, int hypothesis = 0);
   void publishLatestCovariances();
-  void publishStatus(std::int64_t requestId, bool fullDecisions);
+  void publishStatus(std::int64_t requestId, bool fullDecisions, int hypotheses = -1);
   std::vector<loopd::loop_decision_t> decisionList(bool full);
   Eigen::MatrixXd commonFrameCovariance(const std::vector<Key>& keys);
   void rebuildBackend(const std::string& solver);
+  /// Gives a new backend the whole graph (mh: plain factors, optimize, then the groups).
+  void feedRebuilt(Backend& next, BackendUpdate all);
   void resetAll();
   void regroup(std::vector<Key>& moved);
   void commandError(const loopd::command_t& c, std::int8_t code, const std::string& reason,
@@ -176,6 +196,8 @@ class Engine : private GraphView {
   std::map<FactorId, FactorPtr> live_;
   std::unordered_map<FactorId, Owner> owners_;
   std::unordered_map<FactorId, double> lastDecisions_;
+  std::map<FactorId, Group> groups_;  // ambiguous groups by internal id (= arrival order)
+  std::unordered_map<FactorId, std::pair<int, double>> lastGroupDecisions_;
   FactorId nextFactorId_ = 1;
   std::int64_t loopClosures_ = 0;
   std::map<FactorId, std::pair<std::uint32_t, std::uint32_t>> interEdges_;  // anchored factors

@@ -32,7 +32,7 @@ void Publisher::estimate(const RobotEstimate& e, std::int64_t updateSeq, std::in
     m.frame_robot = e.frameRobot;
     m.common_frame = e.commonFrame;
     m.full_snapshot = e.fullSnapshot;
-    m.hypothesis = 0;
+    m.hypothesis = e.hypothesis;
     m.chunk_index = static_cast<std::int32_t>(c);
     m.chunk_count = static_cast<std::int32_t>(chunks);
     m.pose_type = e.se3 ? loopd::estimate_t::SE3 : loopd::estimate_t::SE2;

@@ -24,6 +24,7 @@ using Sink = std::function<void(const std::string& channel, const std::vector<st
 /// One robot's poses/landmarks to publish (already in the frame to publish in).
 struct RobotEstimate {
   std::int32_t robot = 0, frameRobot = 0;
+  std::int32_t hypothesis = 0;  // rank of the hypothesis this estimate belongs to (0 = best)
   bool commonFrame = false, fullSnapshot = false, se3 = false, landmarks3d = false;
   std::vector<std::int64_t> poseIndices;
   std::vector<std::vector<double>> poses;  // 3 or 7 numbers each

@@ -48,6 +48,7 @@ int runServer(const ServerConfig& cfg, const std::atomic<bool>& stop) {
   eo.holdSeconds = cfg.holdSeconds;
   eo.holdMaxBatches = cfg.holdMax;
   eo.idleSeconds = cfg.idleSeconds;
+  eo.maxHypotheses = cfg.maxHypotheses;
   if (!cfg.journal.empty() && !resumeIntoJournal) {
     journal = std::make_unique<Journal>(cfg.journal, exists(cfg.journal));
     if (!journal->good()) {

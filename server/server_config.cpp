@@ -21,7 +21,7 @@ std::string trim(const std::string& s) {
 
 const char* const kKeys[] = {"lcm-url", "solver", "channel-prefix", "journal", "resume",
                              "publish-every", "log-level", "hold-seconds", "hold-max",
-                             "idle-seconds", "config"};
+                             "idle-seconds", "max-hypotheses", "config"};
 
 bool knownKey(const std::string& k) {
   for (const char* x : kKeys)
@@ -60,6 +60,7 @@ void apply(ServerConfig& c, const std::string& k, const std::string& v) {
   else if (k == "hold-seconds") c.holdSeconds = toDouble(k, v);
   else if (k == "hold-max") c.holdMax = toInt(k, v);
   else if (k == "idle-seconds") c.idleSeconds = toDouble(k, v);
+  else if (k == "max-hypotheses") c.maxHypotheses = toInt(k, v);
 }
 
 void loadFile(ServerConfig& c, const std::string& path) {
@@ -117,6 +118,7 @@ ServerConfig parseServerConfig(const std::vector<std::string>& args) {
   if (!isBackendName(c.solver)) throw std::invalid_argument("--solver: unknown solver '" + c.solver + "'");
   if (c.channelPrefix.size() > 53) throw std::invalid_argument("--channel-prefix: at most 53 characters");
   if (c.publishEvery < 0) throw std::invalid_argument("--publish-every must be >= 0");
+  if (c.maxHypotheses < 1) throw std::invalid_argument("--max-hypotheses must be >= 1");
   if (c.holdMax < 0 || c.holdSeconds < 0 || c.idleSeconds < 0)
     throw std::invalid_argument("--hold-max, --hold-seconds and --idle-seconds must be >= 0");
   return c;
@@ -137,6 +139,7 @@ std::string serverUsage() {
          "  --hold-seconds S      how long a batch may wait for a pose not yet introduced (default 30)\n"
          "  --hold-max N          at most N held batches (default 1000)\n"
          "  --idle-seconds S      input pause before iterating to convergence (default 0.5)\n"
+         "  --max-hypotheses K    mh: live hypotheses kept at most (default 10)\n"
          "  --log-level L         trace|debug|info|warn|error|off (default info)\n"
          "  --config FILE         `key = value` lines with the names above; flags override\n"
          "  --help                this text\n";

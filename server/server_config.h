@@ -17,6 +17,7 @@ struct ServerConfig {
   double holdSeconds = 30.0;
   int holdMax = 1000;
   double idleSeconds = 0.5;
+  int maxHypotheses = 10;              // mh: live hypotheses at most (K)
   bool help = false;
 };
 

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <map>
 
 #include "client/estimate_subscriber.h"
 #include "client/factor_publisher.h"
@@ -22,6 +23,12 @@ int main(int argc, char** argv) {
   loopd::client::FactorPublisher pub(lcm, "robot0/odometry");
   // The subscriber keeps the latest estimate of every robot (the server publishes after each update).
   loopd::client::EstimateSubscriber sub(lcm);
+  // Decisions arrive as deltas in status messages: keep the ambiguous ones (id → alternative).
+  std::map<long long, int> chosen;
+  sub.onStatus([&](const loopd::status_t& s) {
+    for (const auto& d : s.decisions)
+      if (d.ambiguous) chosen[d.factor_id] = d.alternative;
+  });
 
   const Eigen::Matrix3d info = Eigen::Vector3d(100, 100, 1000).asDiagonal();  // information, not covariance
   const int robot = 0, steps = 16;
@@ -33,7 +40,17 @@ int main(int argc, char** argv) {
     lcm.handleTimeout(50);                       // let estimates arrive
   }
   // Back at the start: a loop closure (robust handling "" = the server's default for closures).
-  pub.loopClosure(KeyRef::pose(robot, steps), KeyRef::pose(robot, 0), Pose2{0, 0, 0}, info);
+  // A server running `--solver mh` can be told what the place recognition really knows: the
+  // start and the first corner look alike, so it is one of the two (or neither).
+  if (sub.lastStatus().solver == "mh") {
+    using loopd::client::loopClosureFactor;
+    pub.ambiguous(loopd::ambiguous_factor_t::MULTI_ASSOCIATION,
+                  {loopClosureFactor(KeyRef::pose(robot, steps), KeyRef::pose(robot, 0), Pose2{0, 0, 0}, info),
+                   loopClosureFactor(KeyRef::pose(robot, steps), KeyRef::pose(robot, 4), Pose2{0, 0, 0}, info)},
+                  /*nullHypothesis=*/true);
+  } else {
+    pub.loopClosure(KeyRef::pose(robot, steps), KeyRef::pose(robot, 0), Pose2{0, 0, 0}, info);
+  }
   pub.flush();
 
   // Wait for the estimate that includes the closure (the server publishes the moved poses).
@@ -44,5 +61,8 @@ int main(int argc, char** argv) {
   const auto status = sub.lastStatus();
   std::printf("server: %s, %lld poses, chi2 %.4f\n", status.solver.c_str(),
               static_cast<long long>(status.poses), status.chi2);
+  for (const auto& [id, alternative] : chosen)  // the ambiguous closure: -1 = neither
+    std::printf("ambiguous %lld: alternative %d (%d live hypotheses)\n", id, alternative,
+                status.live_hypotheses);
   return 0;
 }

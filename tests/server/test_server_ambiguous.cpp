@@ -1,0 +1,627 @@
+// Ambiguous measurements (ambiguous_factor_t) through the server: validation, the engine with
+// mh (status fields, REQUEST_HYPOTHESES, removal, SWITCH_SOLVER, journal resume), flattening
+// for the other variants, --max-hypotheses. The engine is driven directly (no LCM); the last
+// test runs loopd over real LCM with the client library.
+#include <gtest/gtest.h>
+#include <lcm/lcm-cpp.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "client/estimate_subscriber.h"
+#include "client/factor_publisher.h"
+#include "loopd/command_t.hpp"
+#include "loopd/error_t.hpp"
+#include "loopd/estimate_t.hpp"
+#include "loopd/status_t.hpp"
+#include "server/batch_validator.h"
+#include "server/engine.h"
+#include "server/journal.h"
+#include "server/server_config.h"
+#include "tests/server/live_util.h"
+
+using namespace loopd;
+using namespace loopd::server;
+using client::KeyRef;
+using client::Pose2;
+using A = loopd::ambiguous_factor_t;
+
+namespace {
+
+const Eigen::Matrix3d kInfo = Eigen::Vector3d(100, 100, 1000).asDiagonal();
+
+factor_t odo(std::int64_t id, int r, std::int64_t a, std::int64_t b, Pose2 z, double info = 100) {
+  factor_t f = client::loopClosureFactor(KeyRef::pose(r, a), KeyRef::pose(r, b), z,
+                                         Eigen::Vector3d(info, info, 10 * info).asDiagonal());
+  f.id = id;
+  f.role = factor_t::ROLE_ODOMETRY;
+  return f;
+}
+
+factor_t closure(int r, std::int64_t a, std::int64_t b, Pose2 z, std::int64_t id = 0) {
+  factor_t f = client::loopClosureFactor(KeyRef::pose(r, a), KeyRef::pose(r, b), z, kInfo);
+  f.id = id;
+  return f;
+}
+
+A group(std::int64_t id, std::int8_t mode, std::vector<factor_t> alts, bool null = false,
+        double nullWeight = 0.0) {
+  A a{};
+  a.id = id;
+  a.mode = mode;
+  a.alternatives = std::move(alts);
+  a.num_alternatives = static_cast<std::int16_t>(a.alternatives.size());
+  a.null_hypothesis = null;
+  a.null_weight = nullWeight;
+  return a;
+}
+
+factor_batch_t batch(const std::string& sender, std::int64_t seq, std::vector<factor_t> fs,
+                     std::vector<A> amb = {}, std::vector<std::int64_t> remove = {}) {
+  factor_batch_t b{};
+  b.sender = sender;
+  b.sequence = seq;
+  b.factors = std::move(fs);
+  b.num_factors = static_cast<std::int16_t>(b.factors.size());
+  b.ambiguous = std::move(amb);
+  b.num_ambiguous = static_cast<std::int16_t>(b.ambiguous.size());
+  b.remove_ids = std::move(remove);
+  b.num_remove_ids = static_cast<std::int16_t>(b.remove_ids.size());
+  return b;
+}
+
+template <class T>
+std::vector<uint8_t> encode(const T& m) {
+  std::vector<uint8_t> buf(static_cast<size_t>(m.getEncodedSize()));
+  m.encode(buf.data(), 0, static_cast<int>(buf.size()));
+  return buf;
+}
+
+struct Fixture {
+  std::vector<loopd::error_t> errors;
+  std::vector<status_t> statuses;
+  std::vector<estimate_t> estimates;
+  Publisher pub;
+  Engine engine;
+  std::int64_t seq = 0, id = 0;
+  Fixture(const std::string& solver, Journal* journal = nullptr, int maxHypotheses = 10)
+      : pub(Channels::withPrefix("T_"),
+            [this](const std::string& ch, const std::vector<uint8_t>& b) {
+              const int n = static_cast<int>(b.size());
+              if (ch == "T_ERROR") { loopd::error_t m; m.decode(b.data(), 0, n); errors.push_back(m); }
+              if (ch == "T_STATUS") { status_t m{}; const int used = m.decode(b.data(), 0, n); EXPECT_EQ(used, n) << "status decode"; statuses.push_back(m); }
+              if (ch == "T_ESTIMATE") { estimate_t m; m.decode(b.data(), 0, n); estimates.push_back(m); }
+            }),
+        engine(options(solver, maxHypotheses), pub, journal) {}
+  static EngineOptions options(const std::string& solver, int k) {
+    EngineOptions o;
+    o.solver = solver;
+    o.publishEvery = 0;
+    o.maxHypotheses = k;
+    return o;
+  }
+  void send(const factor_batch_t& b) {
+    engine.post({"T_FACTORS", encode(b)});
+    engine.step();
+  }
+  void command(int8_t c, const std::string& arg = "") {
+    command_t m{};
+    m.sender = "test";
+    m.request_id = 7;
+    m.command = c;
+    m.argument = arg;
+    engine.post({"T_COMMAND", encode(m)});
+    engine.step();
+  }
+  /// A 4 m square driven once (16 steps, a quarter turn every 4): pose 16 is back at pose 0.
+  /// `info`: odometry information of x, y (θ: 10×).
+  void square(double info = 100, int steps = 16) {
+    for (int i = 0; i < steps; ++i)
+      send(batch("fe", ++seq, {odo(id++, 0, i, i + 1, {1, 0, (i % 4 == 3) ? M_PI / 2 : 0.0}, info)}));
+  }
+  /// The reply to REQUEST_STATUS (a periodic status may follow it).
+  status_t fullStatus() {
+    command(command_t::REQUEST_STATUS);
+    for (auto it = statuses.rbegin(); it != statuses.rend(); ++it)
+      if (it->request_id == 7 && it->decisions_full) return *it;
+    ADD_FAILURE() << "no reply to REQUEST_STATUS";
+    return status_t{};
+  }
+  const loop_decision_t* decision(const status_t& s, std::int64_t gid) const {
+    for (const auto& d : s.decisions)
+      if (d.ambiguous && d.factor_id == gid) return &d;
+    return nullptr;
+  }
+  std::vector<double> pose(std::int64_t i) {
+    std::vector<double> out;
+    EXPECT_TRUE(engine.commonFramePose(makeKey(0, KeyKind::Pose, static_cast<std::uint64_t>(i)), out));
+    return out;
+  }
+};
+
+double maxDiff(Fixture& a, Fixture& b, int poses) {
+  double d = 0;
+  for (int i = 0; i <= poses; ++i) {
+    const auto x = a.pose(i), y = b.pose(i);
+    if (x.size() != 3 || y.size() != 3) return 1e9;
+    d = std::max({d, std::hypot(x[0] - y[0], x[1] - y[1]), std::abs(std::remainder(x[2] - y[2], 2 * M_PI))});
+  }
+  return d;
+}
+
+// --- validation ---------------------------------------------------------------------------
+
+TEST(AmbiguousValidation, WellFormedGroupsPass) {
+  FactorBatchValidator v;
+  EXPECT_TRUE(v.check(batch("a", 1, {}, {group(1, A::MULTI_ASSOCIATION,
+                                                 {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 4, {0, 0, 0})})}))
+                  .empty());
+  EXPECT_TRUE(v.check(batch("a", 1, {}, {group(1, A::MULTI_MEASUREMENT,
+                                                 {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 0, {1, 0, 0})})}))
+                  .empty());
+  EXPECT_TRUE(v.check(batch("a", 1, {}, {group(1, A::MULTI_MEASUREMENT, {closure(0, 9, 0, {0, 0, 0})}, true, 2.5)}))
+                  .empty());
+}
+
+TEST(AmbiguousValidation, EachBadGroupGetsItsCode) {
+  FactorBatchValidator v;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  struct Case {
+    const char* what;
+    std::function<void(A&)> mutate;
+    int8_t code;
+  };
+  const std::vector<Case> cases = {
+      {"mode 0", [](A& a) { a.mode = 0; }, loopd::error_t::INVALID_FIELD},
+      {"one alternative, no null", [](A& a) { a.alternatives.resize(1); a.num_alternatives = 1; }, loopd::error_t::INVALID_FIELD},
+      {"no alternative, null", [](A& a) { a.alternatives.clear(); a.num_alternatives = 0; a.null_hypothesis = true; }, loopd::error_t::INVALID_FIELD},
+      {"17 alternatives", [](A& a) {
+         a.alternatives.clear();
+         for (int i = 0; i < 17; ++i) a.alternatives.push_back(closure(0, 30, i, {0, 0, 0}));
+         a.num_alternatives = 17;
+       }, loopd::error_t::LIMIT_EXCEEDED},
+      {"null weight NaN", [&](A& a) { a.null_hypothesis = true; a.null_weight = nan; }, loopd::error_t::NON_FINITE},
+      {"null weight -1", [](A& a) { a.null_hypothesis = true; a.null_weight = -1; }, loopd::error_t::INVALID_FIELD},
+      {"NaN measurement", [&](A& a) { a.alternatives[1].measurement[0] = nan; }, loopd::error_t::NON_FINITE},
+      {"Inf noise", [](A& a) { a.alternatives[0].noise[0] = std::numeric_limits<double>::infinity(); }, loopd::error_t::NON_FINITE},
+      {"non-PD noise", [](A& a) { a.alternatives[1].noise = {1, 0, 0, -1, 0, 1}; }, loopd::error_t::NOT_POSITIVE_DEFINITE},
+      {"odometry role", [](A& a) { for (auto& f : a.alternatives) f.role = factor_t::ROLE_ODOMETRY; }, loopd::error_t::INVALID_FIELD},
+      {"landmark key kind", [](A& a) { a.alternatives[1].keys[1].kind = loopd::key_t::LANDMARK; }, loopd::error_t::WRONG_KEY_KIND},
+      {"mixed types", [](A& a) {
+         a.alternatives[1] = client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, 4), client::Pose3{},
+                                                       Eigen::Matrix<double, 6, 6>::Identity());
+       }, loopd::error_t::INVALID_FIELD},
+      {"association, different measurement", [](A& a) { a.alternatives[1].measurement[0] = 0.5; }, loopd::error_t::INVALID_FIELD},
+      {"association, different noise", [](A& a) { a.alternatives[1].noise[0] = 7; }, loopd::error_t::INVALID_FIELD},
+      {"association, same keys twice", [](A& a) { a.alternatives[1].keys = a.alternatives[0].keys; }, loopd::error_t::INVALID_FIELD},
+      {"measurement mode, different keys", [](A& a) { a.mode = A::MULTI_MEASUREMENT; }, loopd::error_t::INVALID_FIELD},
+      {"inter-robot alternative", [](A& a) { a.alternatives[1].keys[1].robot = 2; }, loopd::error_t::INVALID_FIELD},
+      {"negative id", [](A& a) { a.id = -4; }, loopd::error_t::INVALID_FIELD},
+  };
+  for (const auto& c : cases) {
+    A a = group(3, A::MULTI_ASSOCIATION, {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 4, {0, 0, 0})});
+    c.mutate(a);
+    const auto issues = v.check(batch("a", 1, {}, {a}));
+    ASSERT_FALSE(issues.empty()) << c.what;
+    bool found = false;
+    for (const auto& is : issues) found |= is.code == c.code;
+    EXPECT_TRUE(found) << c.what << ": " << issues[0].reason;
+  }
+  // A group's id shares the factor id space.
+  auto dup = batch("a", 1, {odo(3, 0, 0, 1, {1, 0, 0})},
+                   {group(3, A::MULTI_ASSOCIATION, {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 4, {0, 0, 0})})});
+  EXPECT_EQ(v.check(dup).at(0).code, loopd::error_t::DUPLICATE_FACTOR_ID);
+  // Alternatives count as items.
+  std::vector<factor_t> many;
+  for (int i = 0; i < 190; ++i) many.push_back(odo(100 + i, 0, i, i + 1, {1, 0, 0}));
+  std::vector<factor_t> alts;
+  for (int i = 0; i < 11; ++i) alts.push_back(closure(0, 300, i, {0, 0, 0}));
+  EXPECT_EQ(v.check(batch("a", 1, many, {group(1, A::MULTI_ASSOCIATION, alts)})).at(0).code,
+            loopd::error_t::LIMIT_EXCEEDED);
+}
+
+TEST(AmbiguousValidation, BadBatchesGiveErrorsAndChangeNothing) {
+  for (const std::string solver : {"mh", "isam2"}) {
+    Fixture f(solver);
+    f.square();
+    const status_t before = f.fullStatus();
+    const size_t errorsBefore = f.errors.size();
+    const factor_t good = odo(500, 0, 16, 17, {1, 0, 0});
+    // A valid factor with an invalid group: nothing of the batch is applied.
+    A bad = group(501, A::MULTI_ASSOCIATION, {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 4, {0.5, 0, 0})});
+    f.send(batch("fe", ++f.seq, {good}, {bad}));
+    // Wrong variable type: robot 0 has SE2 poses.
+    A se3 = group(502, A::MULTI_MEASUREMENT,
+                  {client::loopClosureFactor(KeyRef::pose(0, 16), KeyRef::pose(0, 0), client::Pose3{},
+                                             Eigen::Matrix<double, 6, 6>::Identity() * 10),
+                   client::loopClosureFactor(KeyRef::pose(0, 16), KeyRef::pose(0, 0), client::Pose3{},
+                                             Eigen::Matrix<double, 6, 6>::Identity() * 20)});
+    f.send(batch("fe", ++f.seq, {}, {se3}));
+    // Removal of an id never used, and a duplicate of a used id.
+    f.send(batch("fe", ++f.seq, {}, {}, {9999}));
+    f.send(batch("fe", ++f.seq, {}, {group(2, A::MULTI_ASSOCIATION, {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 4, {0, 0, 0})})}));
+    ASSERT_GE(f.errors.size(), errorsBefore + 4) << solver;
+    EXPECT_EQ(f.errors[errorsBefore].factor_id, 501);
+    EXPECT_EQ(f.errors[errorsBefore].code, loopd::error_t::INVALID_FIELD);
+    EXPECT_NE(f.errors[errorsBefore].reason.find("MULTI_ASSOCIATION"), std::string::npos) << f.errors[errorsBefore].reason;
+    bool wrongDim = false, unknownId = false, dupId = false;
+    for (size_t i = errorsBefore; i < f.errors.size(); ++i) {
+      wrongDim |= f.errors[i].code == loopd::error_t::WRONG_DIMENSION && f.errors[i].factor_id == 502;
+      unknownId |= f.errors[i].code == loopd::error_t::UNKNOWN_FACTOR_ID && f.errors[i].factor_id == 9999;
+      dupId |= f.errors[i].code == loopd::error_t::DUPLICATE_FACTOR_ID && f.errors[i].factor_id == 2;
+    }
+    EXPECT_TRUE(wrongDim && unknownId && dupId) << solver;
+    const status_t after = f.fullStatus();
+    EXPECT_EQ(after.poses, before.poses) << solver;
+    EXPECT_EQ(after.factors, before.factors) << solver;
+    EXPECT_EQ(after.ambiguous, 0) << solver;
+    EXPECT_EQ(after.batches_rejected, before.batches_rejected + 4) << solver;
+    EXPECT_DOUBLE_EQ(after.chi2, before.chi2) << solver;
+  }
+}
+
+TEST(AmbiguousEngine, GroupOverUnknownPoseIsHeldThenApplied) {
+  Fixture f("mh");
+  f.square(100, 12);
+  // Pose 16 does not exist yet: the group waits for it.
+  f.send(batch("lc", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 8, {0, 0, 0})}, true)}));
+  EXPECT_EQ(f.statuses.back().batches_held, 1);
+  EXPECT_EQ(f.statuses.back().ambiguous, 0);
+  for (int i = 12; i < 16; ++i)
+    f.send(batch("fe", ++f.seq, {odo(f.id++, 0, i, i + 1, {1, 0, (i % 4 == 3) ? M_PI / 2 : 0.0})}));
+  const status_t s = f.fullStatus();
+  EXPECT_EQ(s.batches_held, 0);
+  EXPECT_EQ(s.ambiguous, 1);
+  ASSERT_NE(f.decision(s, 1), nullptr);
+  EXPECT_EQ(f.decision(s, 1)->alternative, 0);
+  EXPECT_TRUE(f.errors.empty());
+}
+
+// --- mh through the engine ----------------------------------------------------------------
+
+TEST(AmbiguousEngine, MhPicksTheTrueAlternativeAndEqualsTheOutlierFreeOptimum) {
+  // Slightly wrong odometry, so the closure moves things.
+  Fixture f("mh"), ref("isam2");
+  for (Fixture* x : {&f, &ref})
+    for (int i = 0; i < 16; ++i)
+      x->send(batch("fe", ++x->seq, {odo(x->id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+  // Back at the start: pose 0 (true), the opposite corner 8 or the next corner 4 (decoys), or none.
+  f.send(batch("lc", 1, {}, {group(40, A::MULTI_ASSOCIATION,
+                                   {closure(0, 16, 8, {0, 0, 0}), closure(0, 16, 0, {0, 0, 0}),
+                                    closure(0, 16, 4, {0, 0, 0})},
+                                   true)}));
+  ref.send(batch("lc", 1, {closure(0, 16, 0, {0, 0, 0}, 40)}));
+  f.command(command_t::OPTIMIZE);
+  ref.command(command_t::OPTIMIZE);
+  EXPECT_TRUE(f.errors.empty()) << f.errors[0].reason;
+  const status_t s = f.fullStatus();
+  EXPECT_EQ(s.solver, "mh");
+  EXPECT_EQ(s.ambiguous, 1);
+  EXPECT_EQ(s.factors, ref.fullStatus().factors - 1);  // the closure is a group here
+  EXPECT_EQ(s.live_hypotheses, 1);
+  EXPECT_EQ(s.undecided_ambiguous, 0);
+  ASSERT_EQ(s.num_hypotheses, 1);
+  EXPECT_EQ(s.hypotheses[0].rank, 0);
+  EXPECT_EQ(s.hypotheses[0].num_choices, 0);  // nothing undecided
+  const loop_decision_t* d = f.decision(s, 40);
+  ASSERT_NE(d, nullptr);
+  EXPECT_EQ(d->sender, "lc");
+  EXPECT_EQ(d->alternative, 1);
+  EXPECT_TRUE(d->accepted);
+  EXPECT_DOUBLE_EQ(d->weight, 1.0);
+  EXPECT_LT(maxDiff(f, ref, 16), 1e-6);
+  EXPECT_NEAR(s.chi2, ref.statuses.back().chi2, 1e-6 * (1 + s.chi2));
+  EXPECT_GT(s.chi2, 1e-3);  // the closure did pull
+}
+
+TEST(AmbiguousEngine, UndecidedHypothesesStatusRequestAndLaterData) {
+  // Weak odometry: two candidate measurements 0.6 m apart both fit at first.
+  Fixture f("mh");
+  f.square(1.0);
+  f.send(batch("lc", 1, {}, {group(7, A::MULTI_MEASUREMENT,
+                                   {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 0, {0.6, 0, 0})})}));
+  status_t s = f.statuses.back();
+  EXPECT_EQ(s.live_hypotheses, 2);
+  EXPECT_EQ(s.undecided_ambiguous, 1);
+  ASSERT_EQ(s.num_hypotheses, 2);
+  for (int r = 0; r < 2; ++r) {
+    EXPECT_EQ(s.hypotheses[r].rank, r);
+    ASSERT_EQ(s.hypotheses[r].num_choices, 1);
+    EXPECT_EQ(s.hypotheses[r].choices[0].sender, "lc");
+    EXPECT_EQ(s.hypotheses[r].choices[0].ambiguous_id, 7);
+  }
+  EXPECT_LE(s.hypotheses[0].score, s.hypotheses[1].score);
+  EXPECT_NE(s.hypotheses[0].choices[0].alternative, s.hypotheses[1].choices[0].alternative);
+  // The decision reports the best hypothesis's choice, weight = share of hypotheses agreeing.
+  const status_t full = f.fullStatus();
+  ASSERT_NE(f.decision(full, 7), nullptr);
+  EXPECT_EQ(f.decision(full, 7)->alternative, s.hypotheses[0].choices[0].alternative);
+  EXPECT_DOUBLE_EQ(f.decision(full, 7)->weight, 0.5);
+
+  // REQUEST_HYPOTHESES: full snapshots of rank 0 and 1 with their request id, then a status.
+  f.estimates.clear();
+  f.command(command_t::REQUEST_HYPOTHESES, "3");
+  std::map<int, std::map<std::int64_t, std::vector<double>>> byRank;
+  for (const auto& e : f.estimates) {
+    EXPECT_EQ(e.request_id, 7);
+    EXPECT_TRUE(e.full_snapshot);
+    for (int i = 0; i < e.num_poses; ++i) byRank[e.hypothesis][e.pose_indices[i]] = e.poses[i];
+  }
+  ASSERT_EQ(byRank.size(), 2u);
+  ASSERT_EQ(byRank[0].size(), 17u);
+  ASSERT_EQ(byRank[1].size(), 17u);
+  // Pose 16 relative to pose 0 differs by the two measurements (0.6 m along x of pose 16).
+  const double gap = std::hypot(byRank[0][16][0] - byRank[1][16][0], byRank[0][16][1] - byRank[1][16][1]);
+  EXPECT_GT(gap, 0.3);
+  const status_t* reply = nullptr;
+  for (const auto& x : f.statuses)
+    if (x.request_id == 7) reply = &x;
+  ASSERT_NE(reply, nullptr);
+  EXPECT_EQ(reply->num_hypotheses, 2);
+  EXPECT_EQ(reply->live_hypotheses, 2);
+  f.command(command_t::REQUEST_HYPOTHESES, "x");
+  EXPECT_EQ(f.errors.back().code, loopd::error_t::COMMAND_FAILED);
+  EXPECT_EQ(f.errors.back().request_id, 7);
+
+  // A plain closure agreeing with the first measurement decides it.
+  f.send(batch("lc", 2, {closure(0, 16, 0, {0, 0, 0}, 8)}));
+  f.command(command_t::OPTIMIZE);
+  s = f.fullStatus();
+  EXPECT_EQ(s.live_hypotheses, 1);
+  EXPECT_EQ(s.undecided_ambiguous, 0);
+  ASSERT_NE(f.decision(s, 7), nullptr);
+  EXPECT_EQ(f.decision(s, 7)->alternative, 0);
+  EXPECT_DOUBLE_EQ(f.decision(s, 7)->weight, 1.0);
+}
+
+TEST(AmbiguousEngine, MaxHypothesesBoundsLiveHypotheses) {
+  Fixture f("mh", nullptr, 1);
+  f.square(1.0);
+  f.send(batch("lc", 1, {}, {group(7, A::MULTI_MEASUREMENT,
+                                   {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 0, {0.6, 0, 0})})}));
+  EXPECT_EQ(f.statuses.back().live_hypotheses, 1);
+  EXPECT_EQ(f.statuses.back().undecided_ambiguous, 0);
+}
+
+// --- other variants: flattened -------------------------------------------------------------
+
+TEST(AmbiguousEngine, OtherSolversFlattenTheAlternatives) {
+  Fixture plain("isam2"), robust("dcs");
+  for (Fixture* x : {&plain, &robust}) {
+    x->square();
+    x->send(batch("lc", 1, {}, {group(40, A::MULTI_ASSOCIATION,
+                                      {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 8, {0, 0, 0})}, true)}));
+    x->command(command_t::OPTIMIZE);
+    EXPECT_TRUE(x->errors.empty());
+    const status_t s = x->fullStatus();
+    EXPECT_EQ(s.ambiguous, 1);
+    EXPECT_EQ(s.factors, 17);  // 16 odometry + the first pose's prior: alternatives not counted
+    EXPECT_EQ(s.live_hypotheses, 1);
+    EXPECT_EQ(s.num_hypotheses, 0);
+    ASSERT_NE(x->decision(s, 40), nullptr);
+  }
+  // Plain least squares takes both: the decoy drags the square (chi2 far above the optimum's 0).
+  EXPECT_GT(plain.statuses.back().chi2, 10.0);
+  // A robust kernel down-weights the decoy: alternative 0 is the one it keeps.
+  const status_t s = robust.fullStatus();
+  EXPECT_EQ(robust.decision(s, 40)->alternative, 0);
+  EXPECT_TRUE(robust.decision(s, 40)->accepted);
+  // Removing the group removes every alternative.
+  for (Fixture* x : {&plain, &robust}) {
+    x->send(batch("lc", 2, {}, {}, {40}));
+    x->command(command_t::OPTIMIZE);
+    const status_t t = x->fullStatus();
+    EXPECT_EQ(t.ambiguous, 0);
+    EXPECT_EQ(x->decision(t, 40), nullptr);
+    EXPECT_LT(t.chi2, 1e-6);
+    // The id stays used.
+    x->send(batch("lc", 3, {}, {}, {40}));
+    EXPECT_EQ(x->errors.back().code, loopd::error_t::UNKNOWN_FACTOR_ID);
+  }
+}
+
+TEST(AmbiguousEngine, MhRemovalRebuildsWithoutTheGroup) {
+  Fixture f("mh"), ref("mh");
+  for (Fixture* x : {&f, &ref})
+    for (int i = 0; i < 16; ++i)
+      x->send(batch("fe", ++x->seq, {odo(x->id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+  f.send(batch("lc", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 8, {0, 0, 0})})}));
+  f.send(batch("lc", 2, {}, {group(2, A::MULTI_MEASUREMENT, {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
+  ref.send(batch("lc", 2, {}, {group(2, A::MULTI_MEASUREMENT, {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
+  f.send(batch("lc", 3, {}, {}, {1}));
+  EXPECT_TRUE(f.errors.empty()) << f.errors[0].reason;
+  f.command(command_t::OPTIMIZE);
+  ref.command(command_t::OPTIMIZE);
+  const status_t s = f.fullStatus();
+  EXPECT_EQ(s.ambiguous, 1);
+  EXPECT_EQ(f.decision(s, 1), nullptr);
+  ASSERT_NE(f.decision(s, 2), nullptr);
+  EXPECT_EQ(f.decision(s, 2)->alternative, 0);
+  EXPECT_LT(maxDiff(f, ref, 16), 1e-6);
+}
+
+TEST(AmbiguousEngine, SwitchSolverKeepsTheGroups) {
+  Fixture f("isam2");
+  for (int i = 0; i < 16; ++i)
+    f.send(batch("fe", ++f.seq, {odo(f.id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+  f.send(batch("lc", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 16, 8, {0, 0, 0}), closure(0, 16, 0, {0, 0, 0})}, true)}));
+  const double flatChi2 = f.fullStatus().chi2;
+  f.command(command_t::SWITCH_SOLVER, "mh");
+  f.command(command_t::OPTIMIZE);
+  status_t s = f.fullStatus();
+  EXPECT_EQ(s.solver, "mh");
+  EXPECT_EQ(s.ambiguous, 1);
+  ASSERT_NE(f.decision(s, 1), nullptr);
+  EXPECT_EQ(f.decision(s, 1)->alternative, 1);
+  EXPECT_LT(s.chi2, flatChi2);  // the decoy no longer pulls
+  // A group added under mh survives the way back.
+  f.send(batch("lc", 2, {}, {group(2, A::MULTI_MEASUREMENT, {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
+  f.command(command_t::SWITCH_SOLVER, "isam2");
+  s = f.fullStatus();
+  EXPECT_EQ(s.solver, "isam2");
+  EXPECT_EQ(s.ambiguous, 2);
+  f.command(command_t::SWITCH_SOLVER, "mh");
+  f.command(command_t::OPTIMIZE);
+  s = f.fullStatus();
+  EXPECT_EQ(s.ambiguous, 2);
+  EXPECT_EQ(f.decision(s, 1)->alternative, 1);
+  EXPECT_EQ(f.decision(s, 2)->alternative, 0);
+  EXPECT_TRUE(f.errors.empty());
+}
+
+TEST(AmbiguousEngine, JournalResumeReplaysTheGroups) {
+  const std::string path = ::testing::TempDir() + "/" + std::to_string(getpid()) + "_amb_journal.lcmlog";
+  std::remove(path.c_str());
+  status_t first;
+  std::vector<std::vector<double>> poses;
+  {
+    Journal j(path, false);
+    Fixture f("mh", &j);
+    for (int i = 0; i < 16; ++i)
+      f.send(batch("fe", ++f.seq, {odo(f.id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+    f.send(batch("lc", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 16, 8, {0, 0, 0}), closure(0, 16, 0, {0, 0, 0})}, true)}));
+    f.send(batch("lc", 2, {}, {group(2, A::MULTI_MEASUREMENT, {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
+    f.send(batch("lc", 3, {}, {group(3, A::MULTI_ASSOCIATION, {closure(0, 14, 2, {0, 0, 0}), closure(0, 14, 6, {0, 0, 0})}, true)}));
+    f.send(batch("lc", 4, {}, {}, {3}));
+    f.send(batch("lc", 5, {}, {group(-1, A::MULTI_ASSOCIATION, {})}));  // refused: not journaled
+    f.command(command_t::OPTIMIZE);
+    first = f.fullStatus();
+    for (int i = 0; i <= 16; ++i) poses.push_back(f.pose(i));
+    EXPECT_EQ(j.written(), 20);
+  }
+  Fixture g("mh");
+  g.engine.replay(path, false, nullptr);
+  const status_t s = g.fullStatus();
+  EXPECT_EQ(s.ambiguous, 2);
+  EXPECT_EQ(s.ambiguous, first.ambiguous);
+  EXPECT_EQ(s.factors, first.factors);
+  for (std::int64_t gid : {1, 2}) {
+    ASSERT_NE(g.decision(s, gid), nullptr);
+    EXPECT_EQ(g.decision(s, gid)->alternative, g.decision(first, gid)->alternative);
+  }
+  EXPECT_EQ(g.decision(s, 1)->alternative, 1);
+  EXPECT_NEAR(s.chi2, first.chi2, 1e-6 * (1 + first.chi2));
+  for (int i = 0; i <= 16; ++i) {
+    const auto x = g.pose(i);
+    ASSERT_EQ(x.size(), 3u);
+    EXPECT_NEAR(x[0], poses[i][0], 1e-6);
+    EXPECT_NEAR(x[1], poses[i][1], 1e-6);
+  }
+  // The ids are known after the resume: removal of the replayed removal's id is refused.
+  g.send(batch("lc", 6, {}, {}, {3}));
+  EXPECT_EQ(g.errors.back().code, loopd::error_t::UNKNOWN_FACTOR_ID);
+  // Resuming the same journal on another solver flattens the same groups.
+  Fixture h("isam2");
+  h.engine.replay(path, false, nullptr);
+  EXPECT_EQ(h.fullStatus().ambiguous, 2);
+  EXPECT_TRUE(h.errors.empty());
+  std::remove(path.c_str());
+}
+
+TEST(AmbiguousServerConfig, MaxHypothesesFlagAndFile) {
+  EXPECT_EQ(parseServerConfig({}).maxHypotheses, 10);
+  EXPECT_EQ(parseServerConfig({"--max-hypotheses", "3", "--solver", "mh"}).maxHypotheses, 3);
+  EXPECT_EQ(parseServerConfig({"--max-hypotheses=4"}).maxHypotheses, 4);
+  EXPECT_THROW(parseServerConfig({"--max-hypotheses", "0"}), std::invalid_argument);
+  EXPECT_THROW(parseServerConfig({"--max-hypotheses", "two"}), std::invalid_argument);
+  const std::string cfg = ::testing::TempDir() + "/" + std::to_string(getpid()) + "_amb.conf";
+  {
+    std::ofstream out(cfg);
+    out << "solver = mh\nmax-hypotheses = 5\n";
+  }
+  const ServerConfig c = parseServerConfig({"--config", cfg});
+  EXPECT_EQ(c.solver, "mh");
+  EXPECT_EQ(c.maxHypotheses, 5);
+  EXPECT_EQ(parseServerConfig({"--config", cfg, "--max-hypotheses", "2"}).maxHypotheses, 2);
+  std::remove(cfg.c_str());
+}
+
+
+// --- over LCM: loopd --solver mh and the client library ------------------------------------
+
+TEST(AmbiguousLive, ClientGroupThroughLoopdMh) {
+  using namespace loopd::testing_live;
+  const std::string url = uniqueUrl();
+  Proc srv = Proc::start({kLoopd, "--lcm-url", url, "--solver", "mh", "--max-hypotheses", "4",
+                          "--idle-seconds", "0.2"},
+                         tmp("amb_srv.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  ASSERT_TRUE(srv.alive()) << srv.output();
+  lcm::LCM lcm(client::receiveUrl(url));
+  ASSERT_TRUE(lcm.good());
+  client::FactorPublisher pub(lcm, "robot0/fe");
+  client::EstimateSubscriber sub(lcm);
+  std::map<std::int64_t, loop_decision_t> decisions;
+  std::vector<status_t> replies;
+  sub.onStatus([&](const status_t& s) {
+    for (const auto& d : s.decisions) decisions[d.factor_id] = d;
+    if (s.request_id == 42) replies.push_back(s);
+  });
+  std::map<int, int> hypothesisChunks;
+  lcm.subscribeFunction("LOOPD_ESTIMATE", +[](const lcm::ReceiveBuffer*, const std::string&, const estimate_t* m,
+                                      std::map<int, int>* n) {
+    if (m->request_id == 42) ++(*n)[m->hypothesis];
+  }, &hypothesisChunks);
+  auto pump = [&](int ms) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
+    while (std::chrono::steady_clock::now() < end) lcm.handleTimeout(20);
+  };
+  pump(300);
+  for (int i = 0; i < 16; ++i) {
+    pub.odometry(0, i, i + 1, Pose2{1, 0, (i % 4 == 3) ? M_PI / 2 : 0.0}, Eigen::Vector3d(1, 1, 10).asDiagonal());
+    pub.flush();
+    pump(30);
+  }
+  // Settled: back at the start, not 30 m away. Open: two measurements 0.6 m apart.
+  const std::int64_t settled = pub.ambiguous(
+      A::MULTI_MEASUREMENT,
+      {client::loopClosureFactor(KeyRef::pose(0, 16), KeyRef::pose(0, 0), Pose2{30, 0, 0}, kInfo),
+       client::loopClosureFactor(KeyRef::pose(0, 16), KeyRef::pose(0, 0), Pose2{0, 0, 0}, kInfo)},
+      true);
+  pub.flush();
+  pump(300);
+  const std::int64_t open = pub.ambiguous(
+      A::MULTI_MEASUREMENT,
+      {client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0), Pose2{4, 4, M_PI}, kInfo),
+       client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0), Pose2{4.6, 4, M_PI}, kInfo)},
+      false);
+  // The client refuses what the server would.
+  EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0), Pose2{}, kInfo)}, false),
+               std::invalid_argument);
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION,
+                             {client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0), Pose2{}, kInfo),
+                              client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 4), Pose2{1, 0, 0}, kInfo)},
+                             false),
+               std::invalid_argument);
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {}, true, -1.0), std::invalid_argument);
+  pub.flush();
+  pump(800);
+  const status_t s = sub.lastStatus();
+  EXPECT_EQ(s.solver, "mh");
+  EXPECT_EQ(s.ambiguous, 2);
+  ASSERT_TRUE(decisions.count(settled));
+  EXPECT_TRUE(decisions[settled].ambiguous);
+  EXPECT_EQ(decisions[settled].alternative, 1);
+  ASSERT_TRUE(decisions.count(open));
+  EXPECT_EQ(s.live_hypotheses, 2);
+  EXPECT_EQ(s.undecided_ambiguous, 1);
+
+  command_t c{};
+  c.sender = "test";
+  c.request_id = 42;
+  c.command = command_t::REQUEST_HYPOTHESES;
+  c.argument = "";
+  lcm.publish("LOOPD_COMMAND", &c);
+  pump(800);
+  ASSERT_FALSE(replies.empty());
+  EXPECT_EQ(replies.back().num_hypotheses, 2);
+  EXPECT_EQ(hypothesisChunks.size(), 2u);  // ranks 0 and 1, one chunk each
+  EXPECT_EQ(hypothesisChunks[0], 1);
+  EXPECT_EQ(hypothesisChunks[1], 1);
+  EXPECT_EQ(sub.errorsReceived(), 0);
+  srv.kill(SIGINT);
+  EXPECT_EQ(srv.wait(20), 0) << srv.output();
+}
+
+}  // namespace
