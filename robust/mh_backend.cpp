@@ -113,7 +113,7 @@ UpdateResult MhBackend::update(const BackendUpdate& u) {
     for (Hypothesis& h : live_)
       for (const auto& f : second.factors) h.score += predictedIncrease(h, *f);
     apply(second);
-    prune(maxDim_);
+    prune();
   }
   for (const AmbiguousFactor& a : u.ambiguous) {
     Layer layer;
@@ -122,7 +122,6 @@ UpdateResult MhBackend::update(const BackendUpdate& u) {
     layer.null = a.nullHypothesis;
     layer.nullWeight = a.nullWeight;
     layer.dim = a.alternatives.front()->dim();
-    maxDim_ = std::max(maxDim_, layer.dim);
     const int l = static_cast<int>(layers_.size());
     layers_.push_back(std::move(layer));
     layerIndex_.emplace(a.id, l);
@@ -203,7 +202,7 @@ void MhBackend::branch(int l) {
   }
   std::stable_sort(children.begin(), children.end(),
                    [](const Child& a, const Child& b) { return a.score < b.score; });
-  const double limit = children.front().score + chi2Quantile(layer.dim, mh_.pruneProbability);
+  const double limit = children.front().score + pruneGap();
   size_t keep = 1;  // the best child always lives
   while (keep < children.size() && keep < static_cast<size_t>(mh_.maxHypotheses) &&
          children[keep].score <= limit)
@@ -261,10 +260,10 @@ void MhBackend::rescore() {
   for (Hypothesis& h : live_) h.score = h.tree->chi2() + h.penalty;
 }
 
-void MhBackend::prune(int dim) {
+void MhBackend::prune() {
   std::stable_sort(live_.begin(), live_.end(),
                    [](const Hypothesis& a, const Hypothesis& b) { return a.score < b.score; });
-  const double limit = live_.front().score + chi2Quantile(dim, mh_.pruneProbability);
+  const double limit = live_.front().score + pruneGap();
   size_t keep = 1;
   while (keep < live_.size() && keep < static_cast<size_t>(mh_.maxHypotheses) &&
          live_[keep].score <= limit)
@@ -277,7 +276,7 @@ void MhBackend::optimize() {
   // At the optimum χ² itself ranks the hypotheses (the running scores are predictions).
   if (live_.size() > 1) {
     rescore();
-    prune(maxDim_);
+    prune();
   }
 }
 

@@ -17,9 +17,10 @@
 // χ²_d(gateProbability) is not branched on. While several hypotheses live, every later loop
 // closure is scored in each before it is added (a second inner update adds it), and
 // hypotheses are pruned: those more than
-// χ²_d(pruneProbability) worse than the best, and all beyond K. optimize() ranks them by χ² at
+// −2 ln(pruneRatio) worse than the best (a tenth as likely), and all beyond K. optimize() ranks them by χ² at
 // their optimum (plus null penalties).
 #include <array>
+#include <cmath>
 #include <memory>
 #include <optional>
 #include <unordered_map>
@@ -34,7 +35,8 @@ struct MhOptions {
   int maxHypotheses = 10;            // K: live hypotheses at most
   double gateProbability = 0.9999;   // no branch for an alternative with Δχ² > χ²_d(p)
   double nullProbability = 0.999;    // "none" costs χ²_d(p): an alternative must pass χ² at p
-  double pruneProbability = 0.95;    // drop a hypothesis more than χ²_d(p) worse than the best
+  double pruneRatio = 0.1;           // drop a hypothesis less likely than this × the best's
+                                     // (score more than −2 ln(ratio) = 4.6 above the best)
   Isam2Options isam;                 // each hypothesis's Bayes tree
 };
 
@@ -104,7 +106,8 @@ class MhBackend : public Backend {
   double predictedIncrease(Hypothesis& h, const Factor& f);
   /// Score = χ² at the estimate + null penalties (after optimize(), where that is the optimum).
   void rescore();
-  void prune(int dim);
+  void prune();
+  double pruneGap() const { return -2.0 * std::log(mh_.pruneRatio); }
   /// What answering "none" to a layer costs: χ²_d(nullProbability) − 2 ln(nullWeight).
   double nullPenalty(const Layer& layer) const;
 
@@ -114,7 +117,6 @@ class MhBackend : public Backend {
   std::vector<Layer> layers_;
   std::unordered_map<FactorId, int> layerIndex_;       // measurement id → layer
   std::unordered_map<FactorId, int> ids_;  // factor id → −1 (plain) or its alternative's layer
-  int maxDim_ = 3;
   long branchesBuilt_ = 0;
   long predictedAway_ = 0;
   long updates_ = 0;
