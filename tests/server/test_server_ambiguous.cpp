@@ -19,6 +19,7 @@
 #include "server/engine.h"
 #include "server/journal.h"
 #include "server/server_config.h"
+#include "solvers/io/dataset_reader.h"
 #include "tests/server/live_util.h"
 
 using namespace loopd;
@@ -121,12 +122,24 @@ struct Fixture {
       send(batch("fe", ++seq, {odo(id++, 0, i, i + 1, {1, 0, (i % 4 == 3) ? M_PI / 2 : 0.0}, info)}));
   }
   /// The reply to REQUEST_STATUS (a periodic status may follow it).
+  /// The reply to REQUEST_STATUS (a periodic status may follow it), its decision chunks merged.
   status_t fullStatus() {
+    const size_t from = statuses.size();
     command(command_t::REQUEST_STATUS);
-    for (auto it = statuses.rbegin(); it != statuses.rend(); ++it)
-      if (it->request_id == 7 && it->decisions_full) return *it;
-    ADD_FAILURE() << "no reply to REQUEST_STATUS";
-    return status_t{};
+    status_t out{};
+    int chunks = 0;
+    for (size_t i = from; i < statuses.size(); ++i) {
+      const status_t& x = statuses[i];
+      if (x.request_id != 7 || !x.decisions_full) continue;
+      if (chunks == 0) out = x;
+      else out.decisions.insert(out.decisions.end(), x.decisions.begin(), x.decisions.end());
+      EXPECT_EQ(x.decisions_chunk_index, chunks);
+      ++chunks;
+    }
+    if (chunks == 0) ADD_FAILURE() << "no reply to REQUEST_STATUS";
+    else EXPECT_EQ(chunks, out.decisions_chunk_count);
+    out.num_decisions = static_cast<std::int16_t>(std::min<size_t>(out.decisions.size(), 32767));
+    return out;
   }
   const loop_decision_t* decision(const status_t& s, std::int64_t gid) const {
     for (const auto& d : s.decisions)
@@ -517,6 +530,128 @@ TEST(AmbiguousEngine, JournalResumeReplaysTheGroups) {
   EXPECT_EQ(h.fullStatus().ambiguous, 2);
   EXPECT_TRUE(h.errors.empty());
   std::remove(path.c_str());
+}
+
+
+// --- the same as loopd-solve --solver mh --incremental -------------------------------------
+
+std::vector<int> jsonInts(const std::string& path, const std::string& field) {
+  std::stringstream ss;
+  ss << std::ifstream(path).rdbuf();
+  const std::string t = ss.str();
+  std::vector<int> out;
+  auto p = t.find("\"" + field + "\"");
+  if (p == std::string::npos) return out;
+  p = t.find('[', p);
+  const auto e = t.find(']', p);
+  std::stringstream list(t.substr(p + 1, e - p - 1));
+  std::string item;
+  while (std::getline(list, item, ',')) out.push_back(std::stoi(item));
+  return out;
+}
+
+factor_t wireEdge(const io::Edge& e, bool alternative) {
+  factor_t f{};
+  f.type = factor_t::BETWEEN_SE2;
+  const bool consecutive = e.to == e.from + 1 || e.from == e.to + 1;
+  f.role = consecutive && !alternative ? factor_t::ROLE_ODOMETRY : factor_t::ROLE_LOOP_CLOSURE;
+  f.keys = {client::wireKey(KeyRef::pose(0, e.from)), client::wireKey(KeyRef::pose(0, e.to))};
+  f.num_keys = 2;
+  f.measurement = {e.measurement[0], e.measurement[1], e.measurement[2]};
+  f.num_measurement = 3;
+  f.noise_kind = factor_t::NOISE_INFORMATION;
+  for (int i = 0; i < 3; ++i)
+    for (int j = i; j < 3; ++j) f.noise.push_back(e.information(i, j));
+  f.num_noise = 6;
+  f.robust = "";
+  return f;
+}
+
+TEST(AmbiguousEngine, MatchesLoopdSolveMhOnAnAmbiguousDataset) {
+  using namespace loopd::testing_live;
+  const std::string amb = tmp("intel_amb.g2o"), truth = tmp("intel_amb.json"),
+                    est = tmp("intel_amb_est.g2o"), stats = tmp("intel_amb_stats.json");
+  ASSERT_EQ(runTool({kBin + "/tools/loopd-outliers", kData + "/intel.g2o", "--ambiguous", "20",
+                     "--null", "--out", amb, "--truth", truth},
+                    tmp("outliers.log")),
+            0);
+  ASSERT_EQ(runTool({kSolve, amb, "--solver", "mh", "--incremental", "--stats", stats, "--out",
+                     est, "--quiet"},
+                    tmp("solve.log")),
+            0);
+  const std::vector<int> solveChosen = jsonInts(stats, "chosen");
+  ASSERT_EQ(solveChosen.size(), 20u);
+
+  // The file as a front-end would send it: one batch per pose, each edge and each group with
+  // the pose that completes it (loopd-solve --incremental's schedule).
+  const io::Dataset ds = io::readDataset(amb);
+  std::vector<int> groupOf(ds.edges.size(), -1);
+  for (size_t g = 0; g < ds.hypotheses.size(); ++g)
+    for (int k = 0; k < ds.hypotheses[g].count; ++k) groupOf[ds.hypotheses[g].firstEdge + k] = static_cast<int>(g);
+  std::map<std::int64_t, factor_batch_t> byPose;
+  for (size_t i = 0; i < ds.edges.size(); ++i) {
+    if (groupOf[i] >= 0) continue;
+    factor_t f = wireEdge(ds.edges[i], false);
+    f.id = static_cast<std::int64_t>(i);
+    byPose[std::max(ds.edges[i].from, ds.edges[i].to)].factors.push_back(f);
+  }
+  for (size_t g = 0; g < ds.hypotheses.size(); ++g) {
+    const auto& h = ds.hypotheses[g];
+    std::vector<factor_t> alts;
+    std::int64_t due = 0;
+    for (int k = 0; k < h.count; ++k) {
+      const io::Edge& e = ds.edges[static_cast<size_t>(h.firstEdge + k)];
+      alts.push_back(wireEdge(e, true));
+      due = std::max({due, e.from, e.to});
+    }
+    // Group ids after every edge index, in file order.
+    byPose[due].ambiguous.push_back(group(100000 + static_cast<std::int64_t>(g), A::MULTI_ASSOCIATION, alts, h.null));
+  }
+  Fixture f("mh");
+  bool first = true;
+  for (auto& [pose, b] : byPose) {
+    b.sender = "intel";
+    b.sequence = ++f.seq;
+    if (first) {  // the first pose where the file puts it
+      initial_value_t iv{};
+      iv.key = client::wireKey(KeyRef::pose(0, ds.poses[0].id));
+      iv.type = initial_value_t::SE2;
+      iv.value = {ds.poses[0].value[0], ds.poses[0].value[1], ds.poses[0].value[2]};
+      iv.num_value = 3;
+      b.initial_values = {iv};
+      first = false;
+    }
+    b.num_factors = static_cast<std::int16_t>(b.factors.size());
+    b.num_ambiguous = static_cast<std::int16_t>(b.ambiguous.size());
+    b.num_initial_values = static_cast<std::int16_t>(b.initial_values.size());
+    f.engine.post({"T_FACTORS", encode(b)});
+    f.engine.step();
+  }
+  f.command(command_t::OPTIMIZE);
+  ASSERT_TRUE(f.errors.empty()) << f.errors[0].reason;
+  const status_t s = f.fullStatus();
+  EXPECT_EQ(s.ambiguous, 20);
+  std::vector<int> serverChosen;
+  for (size_t g = 0; g < 20; ++g) {
+    const loop_decision_t* d = f.decision(s, 100000 + static_cast<std::int64_t>(g));
+    ASSERT_NE(d, nullptr);
+    serverChosen.push_back(d->alternative);
+  }
+  EXPECT_EQ(serverChosen, solveChosen);
+  EXPECT_EQ(serverChosen, jsonInts(truth, "true_choice"));
+  const auto offline = readVertices(est);
+  double dt = 0, dr = 0;
+  for (const auto& [id, x] : offline) {
+    const auto y = f.pose(id);
+    ASSERT_EQ(y.size(), 3u);
+    dt = std::max(dt, std::hypot(x[0] - y[0], x[1] - y[1]));
+    dr = std::max(dr, std::abs(std::remainder(x[2] - y[2], 2 * M_PI)));
+  }
+  EXPECT_LT(dt, 2e-3);
+  EXPECT_LT(dr, 2e-4);
+  EXPECT_NEAR(s.chi2, statsChi2(stats), 1e-4 * statsChi2(stats));
+  std::printf("    chosen %zu/%zu as loopd-solve, max |dt| %.2e m, |dtheta| %.2e rad, chi2 %.6f vs %.6f\n",
+              serverChosen.size(), solveChosen.size(), dt, dr, s.chi2, statsChi2(stats));
 }
 
 TEST(AmbiguousServerConfig, MaxHypothesesFlagAndFile) {
