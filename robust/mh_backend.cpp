@@ -33,7 +33,30 @@ MhBackend::MhBackend(BackendOptions options, MhOptions mh)
 }
 
 double MhBackend::nullPenalty(const Layer& layer) const {
-  return chi2Quantile(layer.dim, mh_.nullProbability) - 2.0 * std::log(layer.nullWeight);
+  double base = chi2Quantile(layer.dim, mh_.nullProbability);
+  const auto tail = certainTail_.find(layer.dim);
+  if (tail != certainTail_.end()) base = std::max(base, tail->second);
+  return base - 2.0 * std::log(layer.nullWeight);
+}
+
+void MhBackend::refreshCertainTail() {
+  // What "consistent" means in this data: χ² of the loop closures the front-end was sure of,
+  // at the best estimate, per residual dimension.
+  std::unordered_map<int, std::vector<double>> byDim;
+  const Values& x = estimate();
+  for (const auto& f : best().tree->graph().factors()) {
+    if (!f || !isUncertain(f->role())) continue;
+    const auto it = ids_.find(f->id());
+    if (it == ids_.end() || it->second >= 0) continue;  // an alternative, not a certain one
+    byDim[f->dim()].push_back(f->chi2(x));
+  }
+  certainTail_.clear();
+  for (auto& [dim, chi2] : byDim) {
+    if (static_cast<int>(chi2.size()) < mh_.minTailSamples) continue;
+    const size_t k = std::min(chi2.size() - 1, static_cast<size_t>(mh_.tailQuantile * chi2.size()));
+    std::nth_element(chi2.begin(), chi2.begin() + k, chi2.end());
+    certainTail_[dim] = chi2[k];
+  }
 }
 
 void MhBackend::validate(const BackendUpdate& u, const Values& initial) const {
@@ -180,6 +203,7 @@ double MhBackend::predictedIncrease(Hypothesis& h, const Factor& f) {
 
 void MhBackend::branch(int l) {
   const Layer& layer = layers_[l];
+  if (layer.null) refreshCertainTail();
   const double gate = chi2Quantile(layer.dim, mh_.gateProbability);
   std::vector<Child> children;
   for (int p = 0; p < static_cast<int>(live_.size()); ++p) {
@@ -257,7 +281,13 @@ void MhBackend::splitScored(const std::vector<FactorPtr>& factors, std::vector<F
 }
 
 void MhBackend::rescore() {
-  for (Hypothesis& h : live_) h.score = h.tree->chi2() + h.penalty;
+  refreshCertainTail();
+  for (Hypothesis& h : live_) {
+    h.penalty = 0.0;
+    for (size_t l = 0; l < h.choices.size(); ++l)
+      if (h.choices[l] < 0) h.penalty += nullPenalty(layers_[l]);
+    h.score = h.tree->chi2() + h.penalty;
+  }
 }
 
 void MhBackend::prune() {

@@ -12,7 +12,10 @@
 // Scoring: a hypothesis's score is its accumulated χ² increase — the innovation test
 // Δχ² = rᵀ(I + JΣJᵀ)⁻¹r of each uncertain factor against the hypothesis's own marginal Σ of
 // the factor's keys, which is the exact increase of the minimum for a linear problem — plus
-// χ²_d(nullProbability) − 2 ln(null weight) for every layer it answered "none". A layer's children are scored
+// max(χ²_d(nullProbability), the tailQuantile of the χ² of the loop closures sent as certain,
+// at the best estimate) − 2 ln(null weight) for every layer it answered "none": "none" wins
+// only over alternatives that fit worse than nearly every closure the front-end was sure of,
+// so over-confident data do not turn true alternatives into nulls. A layer's children are scored
 // before they are built, so only plausible ones ever are: an alternative above
 // χ²_d(gateProbability) is not branched on. While several hypotheses live, every later loop
 // closure is scored in each before it is added (a second inner update adds it), and
@@ -33,8 +36,10 @@ namespace loopd {
 
 struct MhOptions {
   int maxHypotheses = 10;            // K: live hypotheses at most
-  double gateProbability = 0.9999;   // no branch for an alternative with Δχ² > χ²_d(p)
-  double nullProbability = 0.999;    // "none" costs χ²_d(p): an alternative must pass χ² at p
+  double gateProbability = 0.99999;  // no branch for an alternative with Δχ² > χ²_d(p)
+  double nullProbability = 0.9999;   // "none" costs χ²_d(p): an alternative must pass χ² at p
+  double tailQuantile = 0.999;       // … and fit no worse than this quantile of the certain
+  int minTailSamples = 20;           //     loop closures' χ² (once there are this many)
   double pruneRatio = 0.1;           // drop a hypothesis less likely than this × the best's
                                      // (score more than −2 ln(ratio) = 4.6 above the best)
   Isam2Options isam;                 // each hypothesis's Bayes tree
@@ -110,12 +115,15 @@ class MhBackend : public Backend {
   double pruneGap() const { return -2.0 * std::log(mh_.pruneRatio); }
   /// What answering "none" to a layer costs: χ²_d(nullProbability) − 2 ln(nullWeight).
   double nullPenalty(const Layer& layer) const;
+  /// Recomputes certainTail_ from the best hypothesis (O(factors); per null layer and at the end).
+  void refreshCertainTail();
 
   BackendOptions options_;
   MhOptions mh_;
   std::vector<Hypothesis> live_;  // best first after every update
   std::vector<Layer> layers_;
   std::unordered_map<FactorId, int> layerIndex_;       // measurement id → layer
+  std::unordered_map<int, double> certainTail_;  // residual dim → χ² tail of certain closures
   std::unordered_map<FactorId, int> ids_;  // factor id → −1 (plain) or its alternative's layer
   long branchesBuilt_ = 0;
   long predictedAway_ = 0;
