@@ -171,30 +171,59 @@ void GncBackend::optimize() {
         gate[i] = std::max(c2[i], t.gate * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5));
         if (gate[i] > gnc_.widenFactor * c2[i]) wider = true;
       }
+    // Refinement: decide 0/1 against the gate at the current estimate, re-solve, repeat.
+    auto refine = [&] {
+      for (int it = 0; it < gnc_.maxRefineIterations; ++it) {
+        bool changed = false;
+        for (int i = 0; i < n; ++i) {
+          if (c2[i] <= 0.0) continue;
+          const double w = r2[i] <= gate[i] ? 1.0 : 0.0;
+          changed = changed || w != weights_[i];
+          weights_[i] = w;
+        }
+        if (!changed && it > 0) break;
+        ++refine_;
+        last = solveOnce();
+        iterations += last.iterations;
+        residuals();
+        if (!changed) break;
+      }
+    };
+    // The truncated cost both candidates minimize: trusted χ² + Σ min(χ², gate).
+    auto tlsCost = [&] {
+      double cost = 0.0;
+      for (int i = 0; i < n; ++i)
+        cost += c2[i] > 0.0 ? std::min(r2[i], gate[i]) : graph_[i]->chi2(estimate_);
+      return cost;
+    };
     if (wider) {
-      // Heavy-tailed closures (over-confident information): the χ²_dim(p) threshold dropped
-      // true closures in the GNC's non-convex phase. Redo the GNC with the wider gate.
+      // Heavy-tailed closures (over-confident information): the χ²_dim(p) threshold may have
+      // dropped true closures in the GNC's non-convex phase. Candidate A: this GNC refined
+      // against the gate; candidate B: the GNC redone with c̄² = gate, refined. Keep the one
+      // with the lower truncated cost.
+      refine();
+      const double costA = tlsCost();
+      const Values estimateA = estimate_;
+      const std::vector<double> weightsA = weights_, r2A = r2;
+      const OptimizerResult lastA = last;
       c2 = gate;
       const int firstOuter = outer_;
       gncPass(false);
       outer_ += firstOuter;
-      reason += "; redone with the noise-aware gate";
-    }
-    // Refinement: decide 0/1 against the gate at the current estimate, re-solve, repeat.
-    for (int it = 0; wider && it < gnc_.maxRefineIterations; ++it) {
-      bool changed = false;
-      for (int i = 0; i < n; ++i) {
-        if (c2[i] <= 0.0) continue;
-        const double w = r2[i] <= gate[i] ? 1.0 : 0.0;
-        changed = changed || w != weights_[i];
-        weights_[i] = w;
+      refine();
+      const double costB = tlsCost();
+      if (costA < costB) {
+        estimate_.assignFrom(estimateA);
+        weights_ = weightsA;
+        r2 = r2A;
+        last = lastA;
+        reason += "; GNC with the noise-aware gate tried, refined first GNC kept";
+      } else {
+        reason += "; redone with the noise-aware gate";
       }
-      if (!changed && it > 0) break;
-      ++refine_;
-      last = solveOnce();
-      iterations += last.iterations;
-      residuals();
-      if (!changed) break;
+      char cbuf[96];
+      std::snprintf(cbuf, sizeof cbuf, " (truncated cost %.6g vs %.6g)", costA, costB);
+      reason += cbuf;
     }
     char buf[128];
     std::snprintf(buf, sizeof buf, "; noise scale %.3g, tail gate %.3g x chi2_dim(0.5), %d refinement solves",

@@ -41,10 +41,11 @@ struct GncOptions {
   /// (q = χ²/χ²_dim(0.5)) give
   ///   g = min(medianFactor·q50, q99·(q99/q90)^tailExponent)
   /// (the tail extrapolated by its own steepness, capped by a multiple of the median). Only if
-  /// g·χ²_dim(0.5) > widenFactor·c̄² for some factor (a heavy tail: manhattan) is the GNC
-  /// redone from the same start with c̄² = max(c̄², g·χ²_dim(0.5)), then refined: decide 0/1
-  /// (χ² ≤ gate) at the current estimate, re-solve, until no decision changes. Otherwise the
-  /// plain GNC's decisions stand.
+  /// g·χ²_dim(0.5) > widenFactor·c̄² for some factor (a heavy tail: manhattan) does it act:
+  /// with gate = max(c̄², g·χ²_dim(0.5)), candidate A is this GNC refined (decide 0/1, χ² ≤
+  /// gate, at the current estimate, re-solve, until no decision changes), candidate B the GNC
+  /// redone from the same start with c̄² = gate, refined likewise; the one with the lower
+  /// truncated cost Σ_trusted χ² + Σ min(χ², gate) is kept. Otherwise the plain GNC stands.
   double tailExponent = 3.0;
   double medianFactor = 100.0;
   double widenFactor = 2.0;
