@@ -1,9 +1,12 @@
 #!/usr/bin/env python3
 """Incremental benchmark: loopd-solve --solver isam2 --incremental (one update per pose, the
 full estimate after each, a final optimize) on the datasets, against the GTSAM iSAM2 figures
-of ../shared/REFERENCE.md; then a scaling table on synthetic Manhattan worlds (loopd-synth).
+of ../shared/REFERENCE.md; then scaling tables on synthetic Manhattan worlds (loopd-synth):
+the city world (the robot keeps exploring new streets and closes loops around where it is)
+and the square world (it revisits places anywhere on a map of ~N cells: the worst case).
 
-  bench/incremental_bench.py --build build [--sizes 1000,10000,100000] [--datasets ...]
+  bench/incremental_bench.py --build build [--sizes 1000,10000,100000] [--worlds city,square]
+                             [--only manhattan,...] (--only none: scaling tables alone)
 """
 import argparse, json, os, re, subprocess, sys, tempfile
 
@@ -37,12 +40,13 @@ def main():
     ap.add_argument('--datasets', default=os.path.join(ROOT, '..', 'shared', 'datasets'))
     ap.add_argument('--reference', default=os.path.join(ROOT, '..', 'shared', 'REFERENCE.md'))
     ap.add_argument('--sizes', default='1000,10000,100000')
-    ap.add_argument('--only', default='', help='comma-separated dataset names')
+    ap.add_argument('--only', default='', help='comma-separated dataset names ("none": skip them)')
+    ap.add_argument('--worlds', default='city,square', help='synthetic worlds for the scaling tables')
     args = ap.parse_args()
     exe = os.path.join(args.build, 'tools', 'loopd-solve')
     best = reference_table(args.reference)
     gtsam = gtsam_isam2(args.reference)
-    names = args.only.split(',') if args.only else sorted(
+    names = [] if args.only == 'none' else args.only.split(',') if args.only else sorted(
         os.path.splitext(f)[0] for f in os.listdir(args.datasets) if f.endswith('.g2o'))
 
     print('| dataset | poses | total s | GTSAM total s (ref) | ratio | mean / p99 / max update ms | GTSAM max ms (ref) | final chi2 | within 0.1% of best | peak RSS MB |')
@@ -67,23 +71,27 @@ def main():
               f"{st['final_chi2']:.6f} | {'yes' if ok else 'NO'} | {st['peak_rss_mb']:.0f} |")
 
     synth = os.path.join(args.build, 'bench', 'loopd-synth')
-    if args.sizes and os.path.exists(synth):
-        print('\n| synthetic world poses | loop closures | total s | mean update ms | p99 ms | max ms '
-              '| exploration updates: mean / max ms | loop-closure updates: mean / p99 / max ms |')
+    for world in [w for w in args.worlds.split(',') if w] if args.sizes and os.path.exists(synth) else []:
+        print(f'\n{world} world: `loopd-synth --world {world} --poses N`; load average (1 min) at the start of each run\n')
+        print('| poses | loop closures | online total s | exploration updates: mean / max ms '
+              '| loop-closure updates: mean / p99 / max ms | final chi2 | peak RSS MB | load |')
         print('|---|---|---|---|---|---|---|---|')
         for n in [int(x) for x in args.sizes.split(',') if x]:
             with tempfile.TemporaryDirectory() as d:
-                world = os.path.join(d, f'world{n}.g2o')
-                log = subprocess.run([synth, '--poses', str(n), '--out', world], check=True,
-                                     capture_output=True, text=True).stderr
+                path = os.path.join(d, f'{world}{n}.g2o')
+                log = subprocess.run([synth, '--world', world, '--poses', str(n), '--out', path],
+                                     check=True, capture_output=True, text=True).stderr
                 closures = re.search(r'\((\d+) loop closures\)', log).group(1)
-                sys.stderr.write(f'synthetic {n}...\n')
-                st = solve(exe, world)
-            print(f"| {n} | {closures} | {st['solve_s']:.2f} | {st['update_ms_mean']:.3f} | "
-                  f"{st['update_ms_p99']:.2f} | {st['update_ms_max']:.1f} | "
-                  f"{st['exploration_update_ms_mean']:.3f} / {st['exploration_update_ms_max']:.1f} | "
+                sys.stderr.write(f'synthetic {world} {n}...\n')
+                load = os.getloadavg()[0]
+                st = solve(exe, path)
+            print(f"| {n} | {closures} | {st['solve_s']:.2f} | "
+                  f"{st['exploration_update_ms_mean']:.3f} / "
+                  f"{st['exploration_update_ms_max']:.1f} | "
                   f"{st['closure_update_ms_mean']:.3f} / {st['closure_update_ms_p99']:.2f} / "
-                  f"{st['closure_update_ms_max']:.1f} |")
+                  f"{st['closure_update_ms_max']:.1f} | {st['final_chi2']:.4f} | {st['peak_rss_mb']:.0f} | "
+                  f"{load:.1f} |")
+            sys.stdout.flush()
     return report_misses(misses)
 
 

@@ -41,7 +41,7 @@ struct Options {
   long minGap = 20;
   std::string world = "city";
   long window = 15;   // city: half side of the neighbourhood roamed
-  long advance = 30;  // city: poses per one-cell move of the neighbourhood
+  long advance = 40;  // city: poses per one-cell move of the neighbourhood
 };
 
 Options parse(int argc, char** argv) {

@@ -26,7 +26,7 @@ struct Isam2Options {
   // eliminated first (0: off), if that costs at most recencyFillTolerance × the fill of the
   // plain order (new factors' variables last). Keeps old variables off the root path.
   long recencyGrouping = 300;
-  double recencyFillTolerance = 1.5;
+  double recencyFillTolerance = 1.2;
   double gaugeInformation = 1e8;      // internal prior on the first pose when no prior exists
   int maxFinalIterations = 30;        // optimize(): full relinearizations at most
   double finalRelativeTolerance = 1e-10;  // optimize(): stop when chi2 improves less
