@@ -164,13 +164,22 @@ void GncBackend::optimize() {
     const TailGate t = tailGate(q, gnc_.tailExponent, gnc_.medianFactor);
     scale_ = t.scale;
     tailGate_ = t.gate;
-    bool wider = false;
+    // Wider (heavy tail, manhattan) or tighter (under-confident information: every gate below
+    // c̄²/widenFactor, parking-garage, intel) than the χ²_dim(p) default by widenFactor.
+    bool wider = false, tighter = t.gate > 0.0 && gnc_.tighten;
     std::vector<double> gate(n, 0.0);
     for (int i = 0; i < n; ++i)
       if (c2[i] > 0.0) {
-        gate[i] = std::max(c2[i], t.gate * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5));
+        const double g = t.gate * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
+        gate[i] = std::max(c2[i], g);
         if (gate[i] > gnc_.widenFactor * c2[i]) wider = true;
+        if (!(g * gnc_.widenFactor < c2[i])) tighter = false;
       }
+    if (!wider && tighter) {
+      for (int i = 0; i < n; ++i)
+        if (c2[i] > 0.0) gate[i] = t.gate * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
+      wider = true;  // same procedure: refine, redo with the gate, keep the cheaper
+    }
     // Refinement: decide 0/1 against the gate at the current estimate, re-solve, repeat.
     auto refine = [&] {
       for (int it = 0; it < gnc_.maxRefineIterations; ++it) {

@@ -49,6 +49,9 @@ struct GncOptions {
   double tailExponent = 3.0;
   double medianFactor = 100.0;
   double widenFactor = 2.0;
+  /// Also act when every gate is below c̄²/widenFactor (under-confident information), with
+  /// gate = g·χ²_dim(0.5) itself.
+  bool tighten = true;
   int maxRefineIterations = 20;
 };
 
