@@ -70,6 +70,67 @@ TEST(FactorPublisher, FlushesAtMaxItems) {
   EXPECT_THROW(client::FactorPublisher(cap.sink(), ""), std::invalid_argument);
 }
 
+TEST(FactorPublisher, AmbiguousGroupsAndTheServersRules) {
+  using A = ambiguous_factor_t;
+  Capture cap;
+  client::FactorPublisher pub(cap.sink(), "a", "X_FACTORS");
+  const Eigen::Matrix3d info = Eigen::Vector3d(100, 100, 1000).asDiagonal();
+  const Eigen::Matrix2d info2 = Eigen::Vector2d(10, 20).asDiagonal();
+  pub.odometry(0, 0, 1, Pose2{1, 0, 0}, info);  // id 0
+  const auto place = pub.ambiguous(A::MULTI_ASSOCIATION,
+                                   {client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, 0), Pose2{}, info),
+                                    client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, 4), Pose2{}, info)},
+                                   true, 0.5);
+  const auto tree = pub.ambiguous(A::MULTI_ASSOCIATION,
+                                  {client::landmarkFactor(KeyRef::pose(0, 9), KeyRef::point(0, 1), Eigen::Vector2d(1, 2), info2),
+                                   client::landmarkFactor(KeyRef::pose(0, 9), KeyRef::point(0, 2), Eigen::Vector2d(1, 2), info2),
+                                   client::landmarkFactor(KeyRef::pose(0, 9), KeyRef::point(0, 3), Eigen::Vector2d(1, 2), info2)},
+                                  false, 0.0, 77);
+  EXPECT_EQ(place, 1);  // the factor id space
+  EXPECT_EQ(tree, 77);
+  EXPECT_EQ(pub.pendingItems(), 1 + 2 + 3);  // alternatives count as items
+  pub.flush();
+  ASSERT_EQ(cap.batches.size(), 1u);
+  const auto& b = cap.batches[0];
+  ASSERT_EQ(b.num_ambiguous, 2);
+  EXPECT_EQ(b.ambiguous[0].id, 1);
+  EXPECT_EQ(b.ambiguous[0].mode, A::MULTI_ASSOCIATION);
+  ASSERT_EQ(b.ambiguous[0].num_alternatives, 2);
+  EXPECT_TRUE(b.ambiguous[0].null_hypothesis);
+  EXPECT_DOUBLE_EQ(b.ambiguous[0].null_weight, 0.5);
+  EXPECT_EQ(b.ambiguous[0].alternatives[1].role, factor_t::ROLE_LOOP_CLOSURE);
+  EXPECT_EQ(b.ambiguous[0].alternatives[1].keys[1].index, 4);
+  EXPECT_EQ(b.ambiguous[0].alternatives[1].noise, (std::vector<double>{100, 0, 0, 100, 0, 1000}));
+  EXPECT_EQ(b.ambiguous[1].alternatives[2].type, factor_t::POSE_POINT2);
+  EXPECT_EQ(b.ambiguous[1].alternatives[2].role, factor_t::ROLE_LANDMARK);
+  EXPECT_EQ(b.ambiguous[1].alternatives[2].keys[1].kind, loopd::key_t::LANDMARK);
+  EXPECT_EQ(b.ambiguous[1].alternatives[2].id, 0);
+
+  auto lc = [&](int64_t to, double x) {
+    return client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, to), Pose2{x, 0, 0}, info);
+  };
+  // What the server would refuse is refused here, and nothing is queued.
+  EXPECT_THROW(pub.ambiguous(0, {lc(0, 0), lc(4, 0)}, false), std::invalid_argument);                     // mode
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0)}, false), std::invalid_argument);              // k = 1
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {}, true), std::invalid_argument);                        // k = 0
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0), lc(4, 0)}, true, -1), std::invalid_argument);  // weight
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0), lc(4, 1)}, false), std::invalid_argument);     // measurement
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0), lc(0, 0)}, false), std::invalid_argument);     // same keys
+  EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {lc(0, 0), lc(4, 1)}, false), std::invalid_argument);     // keys differ
+  std::vector<factor_t> many;
+  for (int i = 0; i < 17; ++i) many.push_back(lc(i, 0));
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, many, false), std::invalid_argument);
+  factor_t odo = lc(0, 0);
+  odo.role = factor_t::ROLE_ODOMETRY;
+  EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {odo, odo}, false), std::invalid_argument);
+  factor_t inter = lc(0, 0);
+  inter.keys[1].robot = 3;
+  EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {inter, inter}, true), std::invalid_argument);
+  EXPECT_EQ(pub.pendingItems(), 0);
+  EXPECT_NO_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {lc(0, 0), lc(0, 1)}, false));
+  EXPECT_EQ(pub.pendingItems(), 2);
+}
+
 estimate_t chunk(int64_t seq, int robot, bool full, int index, int count, std::vector<int64_t> ids) {
   estimate_t e{};
   e.update_seq = seq;
