@@ -84,11 +84,11 @@ const std::vector<Entry>& registry() {
        [](const BackendOptions& o) {
          return decorated("mm", RobustMethod::MaxMixture, KernelType::DCS, o);
        }},
-      {{"gnc-gm", "batch GNC, Geman-McClure (Yang 2020); cbar^2 = chi2_dim(0.99)", false},
+      {{"gnc-gm", "batch GNC, Geman-McClure (Yang 2020); cbar^2 = chi2_dim(0.99), noise-aware gate", false},
        [](const BackendOptions& o) { return gnc(GncLoss::GemanMcClure, o); }},
-      {{"gnc-tls", "batch GNC, truncated least squares (Yang 2020); cbar^2 = chi2_dim(0.99)", false},
+      {{"gnc-tls", "batch GNC, truncated least squares (Yang 2020); cbar^2 = chi2_dim(0.99), noise-aware gate", false},
        [](const BackendOptions& o) { return gnc(GncLoss::TruncatedLeastSquares, o); }},
-      {{"risam", "incremental GNC in the riSAM manner (SIG kernel, c = sqrt(chi2_dim(0.95))) over isam2", true},
+      {{"risam", "incremental GNC in the riSAM manner (SIG kernel, c = sqrt(chi2_dim(0.95)), noise-aware test) over isam2", true},
        [](const BackendOptions& o) {
          RisamOptions r;
          if (o.robustParameter > 0.0) r.shape = o.robustParameter;
