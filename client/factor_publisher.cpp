@@ -54,11 +54,12 @@ void FactorPublisher::added(int items) {
   if (items_ >= loopd::factor_batch_t::MAX_ITEMS) flush();
 }
 
-loopd::factor_t FactorPublisher::make(std::int8_t type, std::int8_t role, std::vector<KeyRef> keys,
-                                      std::vector<double> measurement, const double* info, int dim,
-                                      std::int64_t id, const std::string& robust, double robustParam) {
+namespace {
+// A factor_t with id 0 and no robust kernel (the alternatives of ambiguous measurements).
+loopd::factor_t plain(std::int8_t type, std::int8_t role, std::vector<KeyRef> keys,
+                      std::vector<double> measurement, const double* info, int dim) {
   loopd::factor_t f{};
-  f.id = id;
+  f.id = 0;
   f.type = type;
   f.role = role;
   for (const auto& k : keys) f.keys.push_back(wireKey(k));
@@ -68,6 +69,17 @@ loopd::factor_t FactorPublisher::make(std::int8_t type, std::int8_t role, std::v
   f.noise_kind = F::NOISE_INFORMATION;
   f.noise = upperTriangle(info, dim);
   f.num_noise = static_cast<std::int16_t>(f.noise.size());
+  f.robust = "";
+  f.robust_param = 0.0;
+  return f;
+}
+}  // namespace
+
+loopd::factor_t FactorPublisher::make(std::int8_t type, std::int8_t role, std::vector<KeyRef> keys,
+                                      std::vector<double> measurement, const double* info, int dim,
+                                      std::int64_t id, const std::string& robust, double robustParam) {
+  loopd::factor_t f = plain(type, role, std::move(keys), std::move(measurement), info, dim);
+  f.id = id;
   f.robust = robust;
   f.robust_param = robustParam;
   return f;
@@ -124,23 +136,6 @@ std::int64_t FactorPublisher::prior(KeyRef pose, const Pose3& z, const Eigen::Ma
 }
 
 namespace {
-loopd::factor_t plain(std::int8_t type, std::int8_t role, std::vector<KeyRef> keys,
-                      std::vector<double> measurement, const double* info, int dim) {
-  loopd::factor_t f{};
-  f.id = 0;
-  f.type = type;
-  f.role = role;
-  for (const auto& k : keys) f.keys.push_back(wireKey(k));
-  f.num_keys = static_cast<std::int16_t>(f.keys.size());
-  f.measurement = std::move(measurement);
-  f.num_measurement = static_cast<std::int16_t>(f.measurement.size());
-  f.noise_kind = F::NOISE_INFORMATION;
-  f.noise = upperTriangle(info, dim);
-  f.num_noise = static_cast<std::int16_t>(f.noise.size());
-  f.robust = "";
-  f.robust_param = 0.0;
-  return f;
-}
 
 bool sameKeys(const loopd::factor_t& a, const loopd::factor_t& b) {
   if (a.keys.size() != b.keys.size()) return false;

@@ -16,6 +16,7 @@
 #include "loopd/estimate_t.hpp"
 #include "loopd/status_t.hpp"
 #include "server/batch_validator.h"
+#include "tests/server/wire_encode.h"
 #include "server/engine.h"
 #include "server/journal.h"
 #include "server/server_config.h"
@@ -72,12 +73,7 @@ factor_batch_t batch(const std::string& sender, std::int64_t seq, std::vector<fa
   return b;
 }
 
-template <class T>
-std::vector<uint8_t> encode(const T& m) {
-  std::vector<uint8_t> buf(static_cast<size_t>(m.getEncodedSize()));
-  m.encode(buf.data(), 0, static_cast<int>(buf.size()));
-  return buf;
-}
+using test::encode;
 
 struct Fixture {
   std::vector<loopd::error_t> errors;

@@ -15,6 +15,7 @@
 #include "loopd/status_t.hpp"
 #include "server/anchored_between_factor.h"
 #include "server/batch_validator.h"
+#include "tests/server/wire_encode.h"
 #include "server/engine.h"
 #include "server/server_config.h"
 #include "server/session_table.h"
@@ -55,12 +56,7 @@ factor_batch_t batch(const std::string& sender, std::int64_t seq, std::vector<fa
   return b;
 }
 
-template <class T>
-std::vector<uint8_t> encode(const T& m) {
-  std::vector<uint8_t> buf(static_cast<size_t>(m.getEncodedSize()));
-  m.encode(buf.data(), 0, static_cast<int>(buf.size()));
-  return buf;
-}
+using test::encode;
 
 struct Captured {
   std::vector<loopd::error_t> errors;
