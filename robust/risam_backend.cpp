@@ -14,6 +14,18 @@ namespace loopd {
 RisamBackend::RisamBackend(std::unique_ptr<Backend> inner, RisamOptions options)
     : DecoratorBackend(std::move(inner), "RisamBackend"), options_(options) {}
 
+BackendUpdate RisamBackend::regraduate(const std::vector<FactorId>& ids, double mu) {
+  BackendUpdate step;
+  for (FactorId id : ids) {
+    Graduated& g = graduated_[id];
+    step.removals.push_back(g.internalId);
+    g.internalId = kInternalIdBit | nextInternal_++;
+    g.wrapper = wrap(g.original, mu, g.internalId);
+    step.factors.push_back(g.wrapper);
+  }
+  return step;
+}
+
 double RisamBackend::nextMu(double mu) const {
   return std::min(1.0, mu + 1.2 * (mu - options_.muInit + 0.1));
 }
@@ -189,14 +201,7 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     }
     while (mu < 1.0 || extra-- > 0 || lastInnerUpdates_ == 1) {
       mu = nextMu(mu);
-      BackendUpdate step;
-      for (FactorId id : activeIds) {
-        Graduated& g = graduated_[id];
-        step.removals.push_back(g.internalId);
-        g.internalId = kInternalIdBit | nextInternal_++;
-        g.wrapper = wrap(g.original, mu, g.internalId);
-        step.factors.push_back(g.wrapper);
-      }
+      const BackendUpdate step = regraduate(activeIds, mu);
       const UpdateResult r = inner_->update(step);
       result.seconds += r.seconds;
       result.relinearized += r.relinearized;
@@ -273,14 +278,7 @@ int RisamBackend::retryRejected() {
   while (first || mu < 1.0 || extra-- > 0) {
     if (!first) mu = nextMu(mu);
     first = false;
-    BackendUpdate step;
-    for (FactorId id : retry) {
-      Graduated& g = graduated_[id];
-      step.removals.push_back(g.internalId);
-      g.internalId = kInternalIdBit | nextInternal_++;
-      g.wrapper = wrap(g.original, mu, g.internalId);
-      step.factors.push_back(g.wrapper);
-    }
+    const BackendUpdate step = regraduate(retry, mu);
     inner_->update(step);
   }
   retried_ += static_cast<int>(retry.size());

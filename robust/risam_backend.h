@@ -92,6 +92,8 @@ class RisamBackend : public DecoratorBackend {
     FactorId internalId = 0;
   };
   double nextMu(double mu) const;
+  /// The inner update that re-adds each of ids at μ under a fresh internal id.
+  BackendUpdate regraduate(const std::vector<FactorId>& ids, double mu);
   double shapeSquared(int dim) const;
   double rejectChi2(int dim) const;
   void refreshGate();
