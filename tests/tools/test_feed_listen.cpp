@@ -4,6 +4,7 @@
 
 #include <set>
 
+#include "loopd/ambiguous_factor_t.hpp"
 #include "loopd/factor_batch_t.hpp"
 #include "tests/server/live_util.h"
 
@@ -110,6 +111,63 @@ TEST(LoopdListen, WritesEstimateAndCovariancesThenExitsWhenQuiet) {
   std::ifstream e(est);
   std::getline(e, line);
   EXPECT_EQ(line.rfind("VERTEX_SE2 0 ", 0), 0u) << line;
+}
+
+// An intel with 15 ambiguous loop closures (wrong targets: one measurement, other keys).
+std::string ambiguousIntel() {
+  const std::string graph = tmp("intel_amb.g2o");
+  EXPECT_EQ(runTool({kBin + "/tools/loopd-outliers", kData + "/intel.g2o", "--ambiguous", "15", "--null",
+                     "--decoys", "target", "--seed", "6", "--out", graph, "--truth", tmp("intel_amb.json")},
+                    tmp("amb.log")),
+            0);
+  return graph;
+}
+
+TEST(LoopdFeed, HypothesesGroupsBecomeAmbiguousFactors) {
+  const std::string graph = ambiguousIntel(), log = tmp("amb.lcmlog");
+  ASSERT_EQ(runTool({kFeed, graph, "--log", log, "--quiet"}, tmp("feed.log")), 0);
+  int groups = 0, factors = 0;
+  std::set<int64_t> ids;
+  for (const auto& b : readLog(log)) {
+    factors += b.num_factors;
+    for (const auto& f : b.factors) EXPECT_TRUE(ids.insert(f.id).second);
+    for (const auto& a : b.ambiguous) {
+      ++groups;
+      EXPECT_EQ(a.mode, ambiguous_factor_t::MULTI_ASSOCIATION);
+      EXPECT_EQ(a.num_alternatives, 3);
+      EXPECT_TRUE(a.null_hypothesis);
+      EXPECT_TRUE(ids.insert(a.id).second) << "group id " << a.id << " shared";
+      EXPECT_GE(a.id, 2512 + 30);  // after every edge index
+    }
+  }
+  EXPECT_EQ(groups, 15);
+  EXPECT_EQ(factors, 2512 - 15);  // the true closures travel inside their groups
+}
+
+TEST(LoopdFeed, AmbiguousIntelThroughTheServerMatchesLoopdSolve) {
+  const std::string graph = ambiguousIntel(), offline = tmp("amb_offline.g2o"), stats = tmp("amb_stats.json");
+  ASSERT_EQ(runTool({kSolve, graph, "--solver", "mh", "--incremental", "--quiet", "--out", offline, "--stats",
+                     stats},
+                    tmp("solve.log")),
+            0);
+  const std::string url = uniqueUrl();
+  Proc srv = Proc::start({kLoopd, "--lcm-url", url, "--solver", "mh"}, tmp("srv.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  const std::string est = tmp("amb_online.g2o");
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", "3"}, tmp("listen.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  ASSERT_EQ(runTool({kFeed, graph, "--rate", "2000", "--lcm-url", url, "--quiet"}, tmp("feed.log")), 0);
+  ASSERT_EQ(listen.wait(60), 0) << listen.output();
+  srv.kill(SIGINT);
+  EXPECT_EQ(srv.wait(20), 0);
+  const auto a = readVertices(offline), b = readVertices(est);
+  ASSERT_EQ(a.size(), b.size());
+  double worst = 0.0;
+  for (const auto& [id, x] : a) {
+    ASSERT_TRUE(b.count(id)) << id;
+    worst = std::max({worst, std::abs(x[0] - b.at(id)[0]), std::abs(x[1] - b.at(id)[1])});
+  }
+  EXPECT_LT(worst, 1e-3) << "server and loopd-solve --solver mh disagree";
 }
 
 }  // namespace

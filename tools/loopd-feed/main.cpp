@@ -12,6 +12,10 @@
 // (including those crossing segments) is a loop closure. A robot's first pose is sent with the
 // initial value identity (its own frame); the server composes the others from odometry.
 // The k-th batch of a sender has sequence k, so feeding the same file again is a resend.
+// A HYPOTHESES group goes as one ambiguous_factor_t (id = number of edges + its index in file
+// order) in the batch of the pose that completes it: MULTI_MEASUREMENT when its alternatives
+// share keys, MULTI_ASSOCIATION when they share the measurement (a group mixing both stops
+// the feed with an error: the wire has no form for it).
 #include <lcm/lcm-cpp.hpp>
 
 #include <algorithm>
@@ -77,6 +81,31 @@ Options parse(int argc, char** argv) {
   return o;
 }
 
+bool sameKeys(const loopd::factor_t& a, const loopd::factor_t& b) {
+  if (a.keys.size() != b.keys.size()) return false;
+  for (size_t i = 0; i < a.keys.size(); ++i)
+    if (a.keys[i].robot != b.keys[i].robot || a.keys[i].kind != b.keys[i].kind ||
+        a.keys[i].index != b.keys[i].index)
+      return false;
+  return true;
+}
+
+// The wire names one kind per group: the same keys with other measurements, or the same
+// measurement at other keys. A group that mixes both has no wire form.
+std::int8_t ambiguousMode(const std::vector<loopd::factor_t>& alternatives, int line) {
+  bool keys = true, measurement = true;
+  for (const auto& a : alternatives) {
+    keys = keys && sameKeys(a, alternatives.front());
+    measurement = measurement && a.measurement == alternatives.front().measurement &&
+                  a.noise == alternatives.front().noise;
+  }
+  if (keys) return loopd::ambiguous_factor_t::MULTI_MEASUREMENT;
+  if (measurement) return loopd::ambiguous_factor_t::MULTI_ASSOCIATION;
+  throw std::runtime_error("HYPOTHESES group on line " + std::to_string(line) +
+                           " mixes other keys and other measurements: no ambiguous_factor_t mode "
+                           "expresses it");
+}
+
 int run(const Options& o) {
   io::Dataset ds = io::readDataset(o.dataset);
   std::vector<std::int64_t> ids;
@@ -103,19 +132,35 @@ int run(const Options& o) {
         if (k < segment[r].size()) order.push_back(segment[r][k]);
   std::map<std::int64_t, size_t> rank;
   for (size_t i = 0; i < order.size(); ++i) rank[order[i]] = i;
-  // Each edge is due when its last pose appears.
+  // Each edge is due when its last pose appears; a HYPOTHESES group when the last pose of any
+  // of its alternatives does.
   std::vector<std::vector<const io::Edge*>> due(n);
+  std::vector<std::vector<const io::HypothesisGroup*>> dueGroups(n);
   size_t skipped = 0;
-  for (const auto& e : ds.edges) {
+  auto dueAt = [&](const io::Edge& e) -> long {
     const bool landmarkEdge = e.type == io::EdgeType::PosePoint2 || e.type == io::EdgeType::PosePoint3 ||
                               e.type == io::EdgeType::BearingRange2;
     auto a = rank.find(e.from);
     auto b = landmarkEdge ? a : rank.find(e.to);
-    if (a == rank.end() || b == rank.end()) {
-      ++skipped;
-      continue;
+    if (a == rank.end() || b == rank.end()) return -1;
+    return static_cast<long>(std::max(a->second, b->second));
+  };
+  std::vector<char> inGroup(ds.edges.size(), 0);
+  for (const io::HypothesisGroup& g : ds.hypotheses) {
+    long at = 0;
+    for (int k = 0; k < g.count; ++k) {
+      inGroup[static_cast<size_t>(g.firstEdge + k)] = 1;
+      const long d = dueAt(ds.edges[static_cast<size_t>(g.firstEdge + k)]);
+      at = (d < 0 || at < 0) ? -1 : std::max(at, d);
     }
-    due[std::max(a->second, b->second)].push_back(&e);
+    if (at < 0) skipped += static_cast<size_t>(g.count);
+    else dueGroups[static_cast<size_t>(at)].push_back(&g);
+  }
+  for (const auto& e : ds.edges) {
+    if (inGroup[static_cast<size_t>(e.index)]) continue;
+    const long at = dueAt(e);
+    if (at < 0) ++skipped;
+    else due[static_cast<size_t>(at)].push_back(&e);
   }
 
   // Where batches go.
@@ -150,6 +195,41 @@ int run(const Options& o) {
                                                              o.prefix + "FACTORS"));
   std::vector<bool> started(robots, false);
 
+  // One file edge as the wire's factor_t (id = its edge index).
+  auto toFactor = [&](const io::Edge& e) {
+    const int ra = robotOf[e.from];
+    const int d = io::edgeDimension(e.type);
+    const Eigen::MatrixXd info = e.information.topLeftCorner(d, d);
+    loopd::factor_t f{};
+    f.id = e.index;
+    f.noise_kind = loopd::factor_t::NOISE_INFORMATION;
+    f.noise = client::upperTriangle(info.data(), d);
+    f.num_noise = static_cast<std::int16_t>(f.noise.size());
+    f.measurement.assign(e.measurement.begin(), e.measurement.begin() + io::edgeMeasurementSize(e.type));
+    f.num_measurement = static_cast<std::int16_t>(f.measurement.size());
+    f.robust = "";
+    switch (e.type) {
+      case io::EdgeType::BetweenSE2:
+      case io::EdgeType::BetweenSE3: {
+        const int rb = robotOf[e.to];
+        f.type = e.type == io::EdgeType::BetweenSE2 ? loopd::factor_t::BETWEEN_SE2 : loopd::factor_t::BETWEEN_SE3;
+        const bool consecutive = ra == rb && (e.to == e.from + 1 || e.from == e.to + 1);
+        f.role = consecutive ? loopd::factor_t::ROLE_ODOMETRY : loopd::factor_t::ROLE_LOOP_CLOSURE;
+        f.keys = {client::wireKey(KeyRef::pose(ra, e.from)), client::wireKey(KeyRef::pose(rb, e.to))};
+        break;
+      }
+      case io::EdgeType::PosePoint2: f.type = loopd::factor_t::POSE_POINT2; break;
+      case io::EdgeType::PosePoint3: f.type = loopd::factor_t::POSE_POINT3; break;
+      case io::EdgeType::BearingRange2: f.type = loopd::factor_t::BEARING_RANGE2; break;
+    }
+    if (f.keys.empty()) {
+      f.role = loopd::factor_t::ROLE_LANDMARK;
+      f.keys = {client::wireKey(KeyRef::pose(ra, e.from)), client::wireKey(KeyRef::point(ra, e.to))};
+    }
+    f.num_keys = static_cast<std::int16_t>(f.keys.size());
+    return f;
+  };
+
   const auto t0 = std::chrono::steady_clock::now();
   const std::int64_t stepUs = o.rate > 0 ? static_cast<std::int64_t>(1e6 / o.rate) : 1000;
   for (size_t i = 0; i < n; ++i) {
@@ -161,38 +241,20 @@ int run(const Options& o) {
       if (ds.is3d) pub.initialValue(KeyRef::pose(r, id), client::Pose3{});
       else pub.initialValue(KeyRef::pose(r, id), client::Pose2{});
     }
-    for (const io::Edge* e : due[i]) {
-      const int ra = robotOf[e->from];
-      const int d = io::edgeDimension(e->type);
-      const Eigen::MatrixXd info = e->information.topLeftCorner(d, d);
-      loopd::factor_t f{};
-      f.id = e->index;
-      f.noise_kind = loopd::factor_t::NOISE_INFORMATION;
-      f.noise = client::upperTriangle(info.data(), d);
-      f.num_noise = static_cast<std::int16_t>(f.noise.size());
-      f.measurement.assign(e->measurement.begin(), e->measurement.begin() + io::edgeMeasurementSize(e->type));
-      f.num_measurement = static_cast<std::int16_t>(f.measurement.size());
-      f.robust = "";
-      switch (e->type) {
-        case io::EdgeType::BetweenSE2:
-        case io::EdgeType::BetweenSE3: {
-          const int rb = robotOf[e->to];
-          f.type = e->type == io::EdgeType::BetweenSE2 ? loopd::factor_t::BETWEEN_SE2 : loopd::factor_t::BETWEEN_SE3;
-          const bool consecutive = ra == rb && (e->to == e->from + 1 || e->from == e->to + 1);
-          f.role = consecutive ? loopd::factor_t::ROLE_ODOMETRY : loopd::factor_t::ROLE_LOOP_CLOSURE;
-          f.keys = {client::wireKey(KeyRef::pose(ra, e->from)), client::wireKey(KeyRef::pose(rb, e->to))};
-          break;
-        }
-        case io::EdgeType::PosePoint2: f.type = loopd::factor_t::POSE_POINT2; break;
-        case io::EdgeType::PosePoint3: f.type = loopd::factor_t::POSE_POINT3; break;
-        case io::EdgeType::BearingRange2: f.type = loopd::factor_t::BEARING_RANGE2; break;
+    for (const io::Edge* e : due[i]) pub.factor(toFactor(*e));
+    for (const io::HypothesisGroup* g : dueGroups[i]) {
+      std::vector<loopd::factor_t> alternatives;
+      for (int k = 0; k < g->count; ++k) {
+        alternatives.push_back(toFactor(ds.edges[static_cast<size_t>(g->firstEdge + k)]));
+        alternatives.back().id = 0;
+        alternatives.back().role = loopd::factor_t::ROLE_LOOP_CLOSURE;
+        if (alternatives.back().type != loopd::factor_t::BETWEEN_SE2 &&
+            alternatives.back().type != loopd::factor_t::BETWEEN_SE3)
+          alternatives.back().role = loopd::factor_t::ROLE_LANDMARK;
       }
-      if (f.keys.empty()) {
-        f.role = loopd::factor_t::ROLE_LANDMARK;
-        f.keys = {client::wireKey(KeyRef::pose(ra, e->from)), client::wireKey(KeyRef::point(ra, e->to))};
-      }
-      f.num_keys = static_cast<std::int16_t>(f.keys.size());
-      pub.factor(f);
+      // Group ids follow the edge indices: file order, never an edge's id.
+      const std::int64_t id = static_cast<std::int64_t>(ds.edges.size()) + (g - ds.hypotheses.data());
+      pub.ambiguous(ambiguousMode(alternatives, g->line), alternatives, g->null, 0.0, id);
     }
     pub.flush();
     logTime += stepUs;
