@@ -135,8 +135,6 @@ std::int64_t FactorPublisher::prior(KeyRef pose, const Pose3& z, const Eigen::Ma
   return factor(make(F::PRIOR_SE3, F::ROLE_PRIOR, {pose}, pose3(z), info.data(), 6, id));
 }
 
-namespace {
-
 bool sameKeys(const loopd::factor_t& a, const loopd::factor_t& b) {
   if (a.keys.size() != b.keys.size()) return false;
   for (size_t i = 0; i < a.keys.size(); ++i)
@@ -145,6 +143,8 @@ bool sameKeys(const loopd::factor_t& a, const loopd::factor_t& b) {
       return false;
   return true;
 }
+
+namespace {
 
 // The server's rules for an ambiguous group that need no graph (lcmtypes/README.md).
 void checkAmbiguous(std::int8_t mode, const std::vector<loopd::factor_t>& alts, bool null,

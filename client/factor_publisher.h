@@ -123,5 +123,7 @@ loopd::factor_t bearingRangeFactor(KeyRef pose, KeyRef point, double bearing, do
 /// Encodes the upper triangle (row-major, g2o order) of a symmetric matrix.
 std::vector<double> upperTriangle(const double* colMajor, int dim);
 loopd::key_t wireKey(KeyRef k);
+/// Same keys in the same order (what MULTI_MEASUREMENT alternatives share).
+bool sameKeys(const loopd::factor_t& a, const loopd::factor_t& b);
 
 }  // namespace loopd::client

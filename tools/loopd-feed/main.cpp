@@ -81,21 +81,12 @@ Options parse(int argc, char** argv) {
   return o;
 }
 
-bool sameKeys(const loopd::factor_t& a, const loopd::factor_t& b) {
-  if (a.keys.size() != b.keys.size()) return false;
-  for (size_t i = 0; i < a.keys.size(); ++i)
-    if (a.keys[i].robot != b.keys[i].robot || a.keys[i].kind != b.keys[i].kind ||
-        a.keys[i].index != b.keys[i].index)
-      return false;
-  return true;
-}
-
 // The wire names one kind per group: the same keys with other measurements, or the same
 // measurement at other keys. A group that mixes both has no wire form.
 std::int8_t ambiguousMode(const std::vector<loopd::factor_t>& alternatives, int line) {
   bool keys = true, measurement = true;
   for (const auto& a : alternatives) {
-    keys = keys && sameKeys(a, alternatives.front());
+    keys = keys && client::sameKeys(a, alternatives.front());
     measurement = measurement && a.measurement == alternatives.front().measurement &&
                   a.noise == alternatives.front().noise;
   }
