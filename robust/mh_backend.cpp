@@ -21,6 +21,17 @@ void appendMoved(std::vector<Key>& into, const std::vector<Key>& moved) {
   into.insert(into.end(), moved.begin(), moved.end());
 }
 
+/// How many of `sorted` (ascending score) survive: the best always, then those within `gap` of
+/// it, at most `k`.
+template <class Scored>
+size_t survivors(const std::vector<Scored>& sorted, int k, double gap) {
+  const double limit = sorted.front().score + gap;
+  size_t keep = 1;
+  while (keep < sorted.size() && keep < static_cast<size_t>(k) && sorted[keep].score <= limit)
+    ++keep;
+  return keep;
+}
+
 }  // namespace
 
 MhBackend::MhBackend(BackendOptions options, MhOptions mh)
@@ -226,11 +237,7 @@ void MhBackend::branch(int l) {
   }
   std::stable_sort(children.begin(), children.end(),
                    [](const Child& a, const Child& b) { return a.score < b.score; });
-  const double limit = children.front().score + pruneGap();
-  size_t keep = 1;  // the best child always lives
-  while (keep < children.size() && keep < static_cast<size_t>(mh_.maxHypotheses) &&
-         children[keep].score <= limit)
-    ++keep;
+  const size_t keep = survivors(children, mh_.maxHypotheses, pruneGap());
   predictedAway_ += static_cast<long>(children.size() - keep);
   children.resize(keep);
 
@@ -250,12 +257,9 @@ void MhBackend::branch(int l) {
     }
     child.choices = parent.choices;
     child.choices.push_back(c.choice);
-    child.penalty = parent.penalty;
     child.moved = parent.moved;
     child.score = c.score;
-    if (c.choice < 0) {
-      child.penalty += nullPenalty(layer);
-    } else {
+    if (c.choice >= 0) {
       BackendUpdate add;
       add.factors.push_back(layer.alternatives[c.choice]);
       appendMoved(child.moved, child.tree->update(add).moved);
@@ -283,22 +287,17 @@ void MhBackend::splitScored(const std::vector<FactorPtr>& factors, std::vector<F
 void MhBackend::rescore() {
   refreshCertainTail();
   for (Hypothesis& h : live_) {
-    h.penalty = 0.0;
+    double penalty = 0.0;
     for (size_t l = 0; l < h.choices.size(); ++l)
-      if (h.choices[l] < 0) h.penalty += nullPenalty(layers_[l]);
-    h.score = h.tree->chi2() + h.penalty;
+      if (h.choices[l] < 0) penalty += nullPenalty(layers_[l]);
+    h.score = h.tree->chi2() + penalty;
   }
 }
 
 void MhBackend::prune() {
   std::stable_sort(live_.begin(), live_.end(),
                    [](const Hypothesis& a, const Hypothesis& b) { return a.score < b.score; });
-  const double limit = live_.front().score + pruneGap();
-  size_t keep = 1;
-  while (keep < live_.size() && keep < static_cast<size_t>(mh_.maxHypotheses) &&
-         live_[keep].score <= limit)
-    ++keep;
-  live_.resize(keep);
+  live_.resize(survivors(live_, mh_.maxHypotheses, pruneGap()));
 }
 
 void MhBackend::optimize() {

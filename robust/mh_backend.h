@@ -83,7 +83,6 @@ class MhBackend : public Backend {
   struct Hypothesis {
     std::unique_ptr<Isam2Backend> tree;
     std::vector<int> choices;  // per layer
-    double penalty = 0.0;      // null penalties of its "none" choices
     double score = 0.0;
     std::vector<Key> moved;    // by this update (for UpdateResult::moved)
   };
