@@ -115,6 +115,13 @@ AmbiguousFactor ambiguousFactor(const PoseGraphProblem& p, int group) {
   return a;
 }
 
+std::vector<AmbiguousFactor> ambiguousFactors(const PoseGraphProblem& p) {
+  std::vector<AmbiguousFactor> out;
+  out.reserve(p.ambiguous.size());
+  for (int g = 0; g < static_cast<int>(p.ambiguous.size()); ++g) out.push_back(ambiguousFactor(p, g));
+  return out;
+}
+
 void storeEstimate(const Values& estimate, io::Dataset& ds) {
   auto store = [&](io::Vertex& v) {
     const int s = estimate.slot(vertexKey(v));

@@ -38,6 +38,8 @@ PoseGraphProblem buildProblem(const io::Dataset& dataset);
 
 /// Group g as the Backend seam takes it: id g, alternatives the group's factors.
 AmbiguousFactor ambiguousFactor(const PoseGraphProblem& problem, int group);
+/// Every group, in file order.
+std::vector<AmbiguousFactor> ambiguousFactors(const PoseGraphProblem& problem);
 
 /// Copies an estimate back into a dataset's vertices (same ids), for the writers.
 void storeEstimate(const Values& estimate, io::Dataset& dataset);

@@ -51,10 +51,7 @@ AmbiguousRun runAmbiguous(const std::string& file, const tools::AmbiguousOptions
   auto backend = makeBackend(solver, bo);
   tools::runOnline(*backend, p, /*quiet=*/true);
 
-  std::vector<AmbiguousFactor> measurements;
-  for (int g = 0; g < static_cast<int>(p.ambiguous.size()); ++g)
-    measurements.push_back(ambiguousFactor(p, g));
-  const std::vector<int> chosen = chosenAlternatives(*backend, measurements);
+  const std::vector<int> chosen = chosenAlternatives(*backend, ambiguousFactors(p));
   AmbiguousRun r;
   r.groups = static_cast<int>(chosen.size());
   for (size_t g = 0; g < chosen.size(); ++g) r.correct += chosen[g] == amb.trueChoice[g];

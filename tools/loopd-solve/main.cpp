@@ -30,6 +30,7 @@ int run(const tools::SolveOptions& opt) {
   const auto tParse = Clock::now();
   io::Dataset dataset = io::readDataset(opt.input);
   PoseGraphProblem problem = buildProblem(dataset);
+  const std::vector<AmbiguousFactor> measurements = ambiguousFactors(problem);  // HYPOTHESES groups
   const double parseSeconds = since(tParse);
   const double initialChi2 = problem.graph.chi2(problem.initial);
   if (!opt.quiet)
@@ -62,8 +63,7 @@ int run(const tools::SolveOptions& opt) {
       for (int f : g.factors) alternative[f] = 1;
     for (int f = 0; f < problem.graph.size(); ++f)
       if (!alternative[f]) all.factors.push_back(problem.graph[f]);
-    for (int g = 0; g < static_cast<int>(problem.ambiguous.size()); ++g)
-      all.ambiguous.push_back(ambiguousFactor(problem, g));
+    all.ambiguous = measurements;
     if (!backend->handlesAmbiguous()) flattenAmbiguous(all);
     all.initial = problem.initial;
     backend->update(all);
@@ -116,10 +116,7 @@ int run(const tools::SolveOptions& opt) {
           .add("closure_update_ms_max", online.closures.maxMs);
     }
     stats.add("rejected", rejected);
-    if (!problem.ambiguous.empty()) {
-      std::vector<AmbiguousFactor> measurements;
-      for (int g = 0; g < static_cast<int>(problem.ambiguous.size()); ++g)
-        measurements.push_back(ambiguousFactor(problem, g));
+    if (!measurements.empty()) {
       std::vector<std::int64_t> chosen;
       for (int c : chosenAlternatives(*backend, measurements)) chosen.push_back(c);
       stats.add("chosen", chosen);
