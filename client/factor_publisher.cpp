@@ -217,38 +217,24 @@ std::int64_t FactorPublisher::ambiguous(std::int8_t mode, const std::vector<loop
 }
 
 void FactorPublisher::initialValue(KeyRef k, const Pose2& x) {
-  loopd::initial_value_t v{};
-  v.key = wireKey(k);
-  v.type = loopd::initial_value_t::SE2;
-  v.value = {x.x, x.y, x.theta};
-  v.num_value = 3;
-  batch_.initial_values.push_back(v);
-  added(1);
+  addInitial(k, loopd::initial_value_t::SE2, {x.x, x.y, x.theta});
 }
 void FactorPublisher::initialValue(KeyRef k, const Pose3& x) {
-  loopd::initial_value_t v{};
-  v.key = wireKey(k);
-  v.type = loopd::initial_value_t::SE3;
-  v.value = pose3(x);
-  v.num_value = 7;
-  batch_.initial_values.push_back(v);
-  added(1);
+  addInitial(k, loopd::initial_value_t::SE3, pose3(x));
 }
 void FactorPublisher::initialValue(KeyRef k, const Eigen::Vector2d& p) {
-  loopd::initial_value_t v{};
-  v.key = wireKey(k);
-  v.type = loopd::initial_value_t::POINT2;
-  v.value = {p.x(), p.y()};
-  v.num_value = 2;
-  batch_.initial_values.push_back(v);
-  added(1);
+  addInitial(k, loopd::initial_value_t::POINT2, {p.x(), p.y()});
 }
 void FactorPublisher::initialValue(KeyRef k, const Eigen::Vector3d& p) {
+  addInitial(k, loopd::initial_value_t::POINT3, {p.x(), p.y(), p.z()});
+}
+
+void FactorPublisher::addInitial(KeyRef k, std::int8_t type, std::vector<double> value) {
   loopd::initial_value_t v{};
   v.key = wireKey(k);
-  v.type = loopd::initial_value_t::POINT3;
-  v.value = {p.x(), p.y(), p.z()};
-  v.num_value = 3;
+  v.type = type;
+  v.value = std::move(value);
+  v.num_value = static_cast<std::int16_t>(v.value.size());
   batch_.initial_values.push_back(v);
   added(1);
 }

@@ -97,6 +97,7 @@ class FactorPublisher {
  private:
   std::int64_t takeId(std::int64_t id);
   void added(int items);
+  void addInitial(KeyRef k, std::int8_t type, std::vector<double> value);
   loopd::factor_t make(std::int8_t type, std::int8_t role, std::vector<KeyRef> keys,
                        std::vector<double> measurement, const double* info, int dim,
                        std::int64_t id, const std::string& robust = "", double robustParam = 0.0);
