@@ -36,6 +36,7 @@
 #include "loopd/estimate_t.hpp"
 #include "loopd/status_t.hpp"
 #include "solvers/io/dataset_reader.h"
+#include "tools/common/edge_factor.h"
 
 extern char** environ;
 
@@ -134,30 +135,7 @@ inline Schedule buildSchedule(const io::Dataset& ds, int robotsWanted, bool inte
     auto b = landmarkEdge ? a : rank.find(e.to);
     if (a == rank.end() || b == rank.end()) continue;
     const int ra = robotOf[e.from] + robotOffset;
-    const int d = io::edgeDimension(e.type);
-    const Eigen::MatrixXd info = e.information.topLeftCorner(d, d);
-    loopd::factor_t f{};
-    f.id = e.index;
-    f.noise_kind = loopd::factor_t::NOISE_INFORMATION;
-    f.noise = client::upperTriangle(info.data(), d);
-    f.num_noise = static_cast<std::int16_t>(f.noise.size());
-    f.measurement.assign(e.measurement.begin(), e.measurement.begin() + io::edgeMeasurementSize(e.type));
-    f.num_measurement = static_cast<std::int16_t>(f.measurement.size());
-    f.robust = "";
-    if (e.type == io::EdgeType::BetweenSE2 || e.type == io::EdgeType::BetweenSE3) {
-      const int rb = robotOf[e.to] + robotOffset;
-      f.type = e.type == io::EdgeType::BetweenSE2 ? loopd::factor_t::BETWEEN_SE2 : loopd::factor_t::BETWEEN_SE3;
-      const bool consecutive = ra == rb && (e.to == e.from + 1 || e.from == e.to + 1);
-      f.role = consecutive ? loopd::factor_t::ROLE_ODOMETRY : loopd::factor_t::ROLE_LOOP_CLOSURE;
-      f.keys = {client::wireKey(client::KeyRef::pose(ra, e.from)), client::wireKey(client::KeyRef::pose(rb, e.to))};
-    } else {
-      f.type = e.type == io::EdgeType::PosePoint2   ? loopd::factor_t::POSE_POINT2
-               : e.type == io::EdgeType::PosePoint3 ? loopd::factor_t::POSE_POINT3
-                                                    : loopd::factor_t::BEARING_RANGE2;
-      f.role = loopd::factor_t::ROLE_LANDMARK;
-      f.keys = {client::wireKey(client::KeyRef::pose(ra, e.from)), client::wireKey(client::KeyRef::point(ra, e.to))};
-    }
-    f.num_keys = static_cast<std::int16_t>(f.keys.size());
+    loopd::factor_t f = tools::edgeFactor(e, ra, landmarkEdge ? ra : robotOf[e.to] + robotOffset);
     s.steps[std::max(a->second, b->second)].factors.push_back(std::move(f));
   }
   return s;

@@ -30,6 +30,7 @@
 #include "client/factor_publisher.h"
 #include "solvers/io/dataset_reader.h"
 #include "tools/common/cli.h"
+#include "tools/common/edge_factor.h"
 
 using namespace loopd;
 using client::KeyRef;
@@ -186,40 +187,12 @@ int run(const Options& o) {
                                                              o.prefix + "FACTORS"));
   std::vector<bool> started(robots, false);
 
-  // One file edge as the wire's factor_t (id = its edge index).
+  // One file edge as the wire's factor_t (id = its edge index), in its robots' frames.
   auto toFactor = [&](const io::Edge& e) {
-    const int ra = robotOf[e.from];
-    const int d = io::edgeDimension(e.type);
-    const Eigen::MatrixXd info = e.information.topLeftCorner(d, d);
-    loopd::factor_t f{};
-    f.id = e.index;
-    f.noise_kind = loopd::factor_t::NOISE_INFORMATION;
-    f.noise = client::upperTriangle(info.data(), d);
-    f.num_noise = static_cast<std::int16_t>(f.noise.size());
-    f.measurement.assign(e.measurement.begin(), e.measurement.begin() + io::edgeMeasurementSize(e.type));
-    f.num_measurement = static_cast<std::int16_t>(f.measurement.size());
-    f.robust = "";
-    switch (e.type) {
-      case io::EdgeType::BetweenSE2:
-      case io::EdgeType::BetweenSE3: {
-        const int rb = robotOf[e.to];
-        f.type = e.type == io::EdgeType::BetweenSE2 ? loopd::factor_t::BETWEEN_SE2 : loopd::factor_t::BETWEEN_SE3;
-        const bool consecutive = ra == rb && (e.to == e.from + 1 || e.from == e.to + 1);
-        f.role = consecutive ? loopd::factor_t::ROLE_ODOMETRY : loopd::factor_t::ROLE_LOOP_CLOSURE;
-        f.keys = {client::wireKey(KeyRef::pose(ra, e.from)), client::wireKey(KeyRef::pose(rb, e.to))};
-        break;
-      }
-      case io::EdgeType::PosePoint2: f.type = loopd::factor_t::POSE_POINT2; break;
-      case io::EdgeType::PosePoint3: f.type = loopd::factor_t::POSE_POINT3; break;
-      case io::EdgeType::BearingRange2: f.type = loopd::factor_t::BEARING_RANGE2; break;
-    }
-    if (f.keys.empty()) {
-      f.role = loopd::factor_t::ROLE_LANDMARK;
-      f.keys = {client::wireKey(KeyRef::pose(ra, e.from)), client::wireKey(KeyRef::point(ra, e.to))};
-    }
-    f.num_keys = static_cast<std::int16_t>(f.keys.size());
-    return f;
+    const bool between = e.type == io::EdgeType::BetweenSE2 || e.type == io::EdgeType::BetweenSE3;
+    return tools::edgeFactor(e, robotOf[e.from], between ? robotOf[e.to] : robotOf[e.from]);
   };
+
 
   const auto t0 = std::chrono::steady_clock::now();
   const std::int64_t stepUs = o.rate > 0 ? static_cast<std::int64_t>(1e6 / o.rate) : 1000;
