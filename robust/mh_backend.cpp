@@ -284,6 +284,16 @@ void MhBackend::splitScored(const std::vector<FactorPtr>& factors, std::vector<F
   }
 }
 
+MhBackend::Storage MhBackend::cliqueStorage() const {
+  Storage s;
+  std::unordered_set<const double*> seen;
+  for (const Hypothesis& h : live_) {
+    s.sharedBytes += h.tree->cliqueStorageBytes(&seen);
+    s.unsharedBytes += h.tree->cliqueStorageBytes();
+  }
+  return s;
+}
+
 void MhBackend::rescore() {
   refreshCertainTail();
   for (Hypothesis& h : live_) {

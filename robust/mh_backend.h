@@ -74,6 +74,13 @@ class MhBackend : public Backend {
   int liveHypotheses() const { return static_cast<int>(live_.size()); }
   /// Live hypotheses averaged over the updates so far (what the cost scales with).
   double meanLiveHypotheses() const { return updates_ ? double(liveSum_) / updates_ : 1.0; }
+  /// Clique numerics of the live hypotheses: `shared` counts a clique two hypotheses share
+  /// once (what they hold), `unshared` once per hypothesis (what separate trees would hold).
+  struct Storage {
+    size_t sharedBytes = 0;
+    size_t unsharedBytes = 0;
+  };
+  Storage cliqueStorage() const;
   /// Hypotheses built (branched) so far, and children never built because the prediction
   /// pruned them.
   long branchesBuilt() const { return branchesBuilt_; }

@@ -172,16 +172,24 @@ int Isam2Backend::newClique() {
   return c;
 }
 
+size_t Isam2Backend::cliqueStorageBytes(std::unordered_set<const double*>* seen) const {
+  size_t bytes = 0;
+  for (const Clique& C : cliques_) {
+    if (!C.alive) continue;
+    for (const SharedBuffer* b : {&C.m, &C.marginal})
+      if (b->data() && (!seen || seen->insert(b->data()).second))
+        bytes += b->capacity() * sizeof(double);
+  }
+  return bytes;
+}
+
 void Isam2Backend::freeClique(int c) {
   Clique& C = cliques_[c];
   C.alive = false;
   // Small buffers are kept for the clique slot's next use; large ones go back to the system
   // so peak memory tracks the live tree.
-  if (C.m.capacity > (1u << 20)) {
-    C.m.p.reset();
-    C.m.capacity = 0;
-  }
-  std::vector<double>().swap(C.marginal);
+  if (C.m.capacity() > (1u << 20) || C.m.shared()) C.m.release();
+  C.marginal.release();
   C.children.clear();
   C.vars.clear();
   C.offsets.clear();
@@ -551,8 +559,7 @@ void Isam2Backend::recompute() {
     for (int attempt = 0;; ++attempt) {
       {
         const size_t n = C.n;
-        C.m.ensure(n * n + n);
-        double* M = C.m.data();
+        double* M = C.m.writable(n * n + n);
         for (size_t j = 0; j < n; ++j) std::fill_n(M + j * n + j, n - j, 0.0);  // lower part
         std::fill_n(M + n * n, n, 0.0);
       }

@@ -12,9 +12,11 @@
 #include <array>
 #include <memory>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "solvers/backend/backend.h"
+#include "solvers/incremental/shared_buffer.h"
 
 namespace loopd {
 
@@ -63,38 +65,14 @@ class Isam2Backend : public Backend {
   const Isam2Options& isamOptions() const { return isam_; }
   bool hasGaugePrior() const { return gaugeFactor_ >= 0; }
   int cliqueCount() const { return static_cast<int>(cliques_.size() - freeCliques_.size()); }
+  /// Bytes of clique numerics (conditionals with separator factors, cached marginals) in the
+  /// live tree. With `seen`: only buffers not in it yet, which it then records — summed over
+  /// copies of one backend, what they hold together with their shared cliques counted once.
+  size_t cliqueStorageBytes(std::unordered_set<const double*>* seen = nullptr) const;
   /// True if key is a frontal variable of a root clique (where the newest pose should be).
   bool isInRootClique(Key key) const;
 
  private:
-  /// Uninitialised, reusable storage: the eliminator zeroes only what it accumulates into.
-  struct Buffer {
-    std::unique_ptr<double[]> p;
-    size_t capacity = 0;
-    Buffer() = default;
-    Buffer(Buffer&&) noexcept = default;
-    Buffer& operator=(Buffer&&) noexcept = default;
-    // Deep copy: a copied backend (a forked hypothesis, see robust/mh_backend.h) owns its tree.
-    Buffer(const Buffer& o) : capacity(o.capacity) {
-      if (o.p) {
-        p.reset(new double[capacity]);
-        std::copy(o.p.get(), o.p.get() + capacity, p.get());
-      }
-    }
-    Buffer& operator=(const Buffer& o) {
-      if (this != &o) *this = Buffer(o);
-      return *this;
-    }
-    double* data() { return p.get(); }
-    const double* data() const { return p.get(); }
-    void ensure(size_t n) {
-      if (n > capacity || 4 * n + 4096 < capacity) {
-        p.reset(new double[n]);
-        capacity = n;
-      }
-    }
-  };
-
   struct Clique {
     int parent = -1;
     std::vector<int> children;
@@ -106,8 +84,9 @@ class Isam2Backend : public Backend {
     // n×n column-major, then n entries: top-left L_FF (lower Cholesky factor of the frontal
     // block), bottom-left L_SF = H_SF·L_FF⁻ᵀ, bottom-right the separator factor's Hessian
     // (symmetric); vector: d = L_FF⁻¹·b_F, then the separator factor's b.
-    Buffer m;  // only the lower triangle of the symmetric parts is kept
-    std::vector<double> marginal;  // n×n joint covariance of vars (cached per epoch)
+    // Copies of the backend share both buffers until one of them re-eliminates the clique.
+    SharedBuffer m;  // only the lower triangle of the symmetric parts is kept
+    SharedBuffer marginal;  // n×n joint covariance of vars (cached per epoch)
     long marginalEpoch = -1;
     long topStamp = -1;
     long createdStamp = -1;
@@ -137,7 +116,7 @@ class Isam2Backend : public Backend {
   double deltaMax(int v) const;
 
   // --- marginals
-  const std::vector<double>& cliqueMarginal(int c);
+  const double* cliqueMarginal(int c);
   void computeCliqueMarginal(int c);
   int varIndex(Key k) const;
 

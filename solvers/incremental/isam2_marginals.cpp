@@ -42,8 +42,7 @@ void Isam2Backend::computeCliqueMarginal(int c) {
   // (RᵀR)⁻¹ = (L·Lᵀ)⁻¹ = L⁻ᵀ·L⁻¹
   Eigen::MatrixXd X = Eigen::MatrixXd::Identity(nf, nf);
   LFF.triangularView<Eigen::Lower>().solveInPlace(X);
-  C.marginal.resize(static_cast<size_t>(n) * n);
-  Eigen::Map<Eigen::MatrixXd> S(C.marginal.data(), n, n);
+  Eigen::Map<Eigen::MatrixXd> S(C.marginal.writable(static_cast<size_t>(n) * n), n, n);
   S.topLeftCorner(nf, nf).noalias() = X.transpose() * X;
   if (ns > 0) {
     const Clique& P = cliques_[C.parent];
@@ -71,14 +70,14 @@ void Isam2Backend::computeCliqueMarginal(int c) {
   C.marginalEpoch = epoch_;
 }
 
-const std::vector<double>& Isam2Backend::cliqueMarginal(int c) {
+const double* Isam2Backend::cliqueMarginal(int c) {
   if (cliques_[c].marginalEpoch != epoch_) {
     std::vector<int> chain;
     for (int a = c; a >= 0 && cliques_[a].marginalEpoch != epoch_; a = cliques_[a].parent)
       chain.push_back(a);
     for (size_t i = chain.size(); i-- > 0;) computeCliqueMarginal(chain[i]);
   }
-  return cliques_[c].marginal;
+  return cliques_[c].marginal.data();
 }
 
 Eigen::MatrixXd Isam2Backend::marginalCovariance(const std::vector<Key>& keys) {
@@ -98,7 +97,7 @@ Eigen::MatrixXd Isam2Backend::marginalCovariance(const std::vector<Key>& keys) {
   }
   if (home < 0) return marginalCovarianceByPathSolve(keys);
   const Clique& C = cliques_[home];
-  const Eigen::Map<const Eigen::MatrixXd> S(cliqueMarginal(home).data(), C.n, C.n);
+  const Eigen::Map<const Eigen::MatrixXd> S(cliqueMarginal(home), C.n, C.n);
   std::vector<int> off(vs.size() + 1, 0), src(vs.size());
   for (size_t i = 0; i < vs.size(); ++i) {
     off[i + 1] = off[i] + dims_[vs[i]];
@@ -119,10 +118,10 @@ std::vector<Eigen::MatrixXd> Isam2Backend::marginals(const std::vector<Key>& key
     const int v = varIndex(k);
     const int c = cliqueOf_[v];
     const Clique& C = cliques_[c];
-    const std::vector<double>& m = cliqueMarginal(c);
+    const double* m = cliqueMarginal(c);
     const int i = static_cast<int>(std::find(C.vars.begin(), C.vars.end(), v) - C.vars.begin());
     const int o = C.offsets[i], d = dims_[v];
-    out.push_back(Eigen::Map<const Eigen::MatrixXd>(m.data(), C.n, C.n).block(o, o, d, d));
+    out.push_back(Eigen::Map<const Eigen::MatrixXd>(m, C.n, C.n).block(o, o, d, d));
   }
   return out;
 }

@@ -267,6 +267,38 @@ TEST(MhBackend, BranchesAreIndependentCopies) {
   EXPECT_GT(std::abs(dx), 1e-4);  // each took its own closure
 }
 
+TEST(MhBackend, LiveHypothesesShareTheCliquesTheirChoiceDoesNotTouch) {
+  // A 400-pose square walk, then an ambiguous closure among the last poses whose two
+  // alternatives fit alike: two hypotheses live, and everything below the closure's path to
+  // the root is one set of cliques for both.
+  BackendOptions o;
+  auto mh = std::make_unique<MhBackend>(o, MhOptions{});
+  const Eigen::Matrix3d info = Eigen::Vector3d(100, 100, 400).asDiagonal();
+  std::vector<SE2> truth = {SE2()};
+  for (int i = 1; i < 400; ++i) {
+    const SE2 step(1.0, 0.0, i % 10 == 0 ? M_PI / 2 : 0.0);
+    truth.push_back(truth.back() * step);
+    BackendUpdate u;
+    auto f = std::make_shared<BetweenFactorSE2>(poseKey(i - 1), poseKey(i), step, info,
+                                                FactorRole::Odometry);
+    f->setId(i);
+    u.factors.push_back(f);
+    if (i == 1) u.initial.insert(poseKey(0), SE2());
+    mh->update(u);
+  }
+  AmbiguousFactor a;
+  a.id = 1000;
+  const SE2 m = truth[399].inverse() * truth[395];
+  a.alternatives = {closure(1001, 399, 395, m), closure(1002, 399, 395, m * SE2(0.01, 0, 0))};
+  BackendUpdate u;
+  u.ambiguous.push_back(a);
+  mh->update(u);
+  ASSERT_EQ(mh->liveHypotheses(), 2);
+  const MhBackend::Storage s = mh->cliqueStorage();
+  EXPECT_LT(s.sharedBytes, 0.6 * s.unsharedBytes) << s.sharedBytes << " of " << s.unsharedBytes;
+  EXPECT_GT(s.sharedBytes, 0.5 * s.unsharedBytes);  // the closure's own cliques differ
+}
+
 TEST(MhBackend, InvalidUpdatesAreRefusedWhole) {
   auto mh = squareBackend();
   const int factorsBefore = mh->graph().size();

@@ -1,5 +1,6 @@
 #include "tools/loopd-outliers/ambiguous_generator.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <stdexcept>
@@ -106,6 +107,53 @@ io::Edge measurementDecoy(const io::Edge& truth, const Context& c, Rng& rng) {
   return d;
 }
 
+/// Same keys, a measurement δ ∈ [2, 4] standard deviations away: e = δ·L⁻ᵀu for Ω = LLᵀ and
+/// a random unit u, so eᵀΩe = δ², applied on the measurement's tangent (m·Exp(e) for poses).
+io::Edge aliasedDecoy(const io::Edge& truth, Rng& rng) {
+  io::Edge d = truth;
+  auto& m = d.measurement;
+  const int dim = truth.type == io::EdgeType::BetweenSE3   ? 6
+                  : truth.type == io::EdgeType::BetweenSE2 ? 3
+                  : truth.type == io::EdgeType::PosePoint3 ? 3
+                                                           : 2;
+  const Eigen::MatrixXd omega = truth.information.topLeftCorner(dim, dim);
+  Eigen::VectorXd u(dim);
+  for (int i = 0; i < dim; ++i) u[i] = rng.normal();
+  if (u.norm() < 1e-12) u[0] = 1.0;
+  u *= rng.uniform(2.0, 4.0) / u.norm();
+  const Eigen::LLT<Eigen::MatrixXd> llt(omega);
+  const Eigen::VectorXd e = llt.matrixU().solve(u);  // Lᵀe = u
+  switch (truth.type) {
+    case io::EdgeType::BetweenSE2: {  // m·(e_t, e_θ): the residual's own (local) frame
+      const double c = std::cos(m[2]), s = std::sin(m[2]);
+      m[0] += c * e[0] - s * e[1];
+      m[1] += s * e[0] + c * e[1];
+      m[2] = std::remainder(m[2] + e[2], 2.0 * M_PI);
+      break;
+    }
+    case io::EdgeType::BetweenSE3: {
+      const Eigen::Vector3d w = e.tail<3>();
+      Eigen::Quaterniond q(m[6], m[3], m[4], m[5]);
+      const Eigen::Vector3d t = q * Eigen::Vector3d(e.head<3>());
+      for (int i = 0; i < 3; ++i) m[i] += t[i];
+      if (w.norm() > 1e-15) q = q * Eigen::Quaterniond(Eigen::AngleAxisd(w.norm(), w.normalized()));
+      q.normalize();
+      if (q.w() < 0) q.coeffs() = -q.coeffs();
+      m[3] = q.x(), m[4] = q.y(), m[5] = q.z(), m[6] = q.w();
+      break;
+    }
+    case io::EdgeType::PosePoint2:
+    case io::EdgeType::PosePoint3:
+      for (int i = 0; i < dim; ++i) m[i] += e[i];
+      break;
+    case io::EdgeType::BearingRange2:
+      m[0] = std::remainder(m[0] + e[0], 2.0 * M_PI);
+      m[1] = std::max(0.1, m[1] + e[1]);
+      break;
+  }
+  return d;
+}
+
 /// Same measurement, wrong target near the true one; false when none is free.
 bool targetDecoy(const io::Edge& truth, const Context& c, int window,
                  std::unordered_set<std::int64_t>& used, Rng& rng, io::Edge& out) {
@@ -153,6 +201,7 @@ const char* decoyModeName(DecoyMode m) {
     case DecoyMode::Target: return "target";
     case DecoyMode::Measurement: return "measurement";
     case DecoyMode::Mixed: return "mixed";
+    case DecoyMode::Aliased: return "aliased";
   }
   return "?";
 }
@@ -161,7 +210,8 @@ DecoyMode decoyModeFromName(const std::string& n) {
   if (n == "target") return DecoyMode::Target;
   if (n == "measurement") return DecoyMode::Measurement;
   if (n == "mixed") return DecoyMode::Mixed;
-  throw std::invalid_argument("--decoys takes target, measurement or mixed, got '" + n + "'");
+  if (n == "aliased") return DecoyMode::Aliased;
+  throw std::invalid_argument("--decoys takes target, measurement, mixed or aliased, got '" + n + "'");
 }
 
 AmbiguousResult makeAmbiguous(const io::Dataset& input, const AmbiguousOptions& opt) {
@@ -214,7 +264,9 @@ AmbiguousResult makeAmbiguous(const io::Dataset& input, const AmbiguousOptions& 
       io::Edge decoy;
       const bool wantTarget = opt.decoys == DecoyMode::Target ||
                               (opt.decoys == DecoyMode::Mixed && rng.uniform() < 0.5);
-      if (!(wantTarget && targetDecoy(e, c, opt.window, used, rng, decoy)))
+      if (opt.decoys == DecoyMode::Aliased)
+        decoy = aliasedDecoy(e, rng);
+      else if (!(wantTarget && targetDecoy(e, c, opt.window, used, rng, decoy)))
         decoy = measurementDecoy(e, c, rng);
       out.decoys.push_back(push(decoy));
     }

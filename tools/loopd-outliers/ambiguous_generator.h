@@ -23,7 +23,9 @@
 
 namespace loopd::tools {
 
-enum class DecoyMode { Target, Measurement, Mixed };
+// Aliased: a wrong measurement 2–4 standard deviations (of the edge's own information) from
+// the true one: plausible at first, the case where many hypotheses stay alive.
+enum class DecoyMode { Target, Measurement, Mixed, Aliased };
 
 struct AmbiguousOptions {
   int count = 50;         // N

@@ -28,13 +28,15 @@ const char* kUsage =
     "seed (default 1). Writes OUT.g2o (all edges; the outliers last) and TRUTH.json\n"
     "{input, mode, count, seed, group_size, outliers: [0-based edge indices], inlier_edges}.\n\n"
     "       loopd-outliers INPUT --ambiguous N [--alternatives K] [--null]\n"
-    "                      [--decoys target|measurement|mixed] [--window W] [--landmarks]\n"
+    "                      [--decoys target|measurement|mixed|aliased] [--window W] [--landmarks]\n"
     "                      [--seed S] --out OUT.g2o --truth TRUTH.json\n\n"
     "Turns N true loop closures (--landmarks: landmark re-sightings) into ambiguous\n"
     "measurements: a 'HYPOTHESES K [null]' group (default K = 3) holding the true edge at a\n"
     "random position and K - 1 decoys: a wrong target within W poses (default 10; for a\n"
     "sighting, a nearby landmark already seen), or a wrong measurement (translation moved by\n"
-    "0.5-2 x the median loop length, rotation by 10-45 degrees). TRUTH.json: {input, mode:\n"
+    "0.5-2 x the median loop length, rotation by 10-45 degrees); 'aliased': a wrong\n"
+    "measurement only 2-4 of the edge's own standard deviations away (whitened), which the\n"
+    "data may take long to tell apart -- the stress case for --max-hypotheses. TRUTH.json: {input, mode:\n"
     "ambiguous, count, alternatives, null, decoys, seed, outliers: [decoy edge indices],\n"
     "true_choice: [per group], true_edges: [per group]}.\n";
 

@@ -161,6 +161,47 @@ TEST(Isam2, RemovingAFactorEqualsNeverAddingIt) {
               1e-7);
 }
 
+TEST(Isam2, CopiesShareUntouchedCliquesAndStayIndependent) {
+  // How mh branches a hypothesis: a copy shares every clique's numerics with its original
+  // until one of them re-eliminates the clique. Neither may see the other's later updates.
+  const PoseGraphProblem p = prefix(load("manhattan.g2o"), 800);
+  Isam2Backend a;
+  std::unique_ptr<Isam2Backend> snap;
+  Values atCopy;
+  feed(a, p, [&](Key pose) {
+    if (keyIndex(pose) == 600) {
+      snap = std::make_unique<Isam2Backend>(a);
+      atCopy = a.estimate();
+      std::unordered_set<const double*> seen;
+      const size_t first = a.cliqueStorageBytes(&seen);
+      EXPECT_EQ(snap->cliqueStorageBytes(&seen), 0u);  // a fresh copy shares everything
+      EXPECT_EQ(first, a.cliqueStorageBytes());
+    }
+  });
+  ASSERT_TRUE(snap);
+
+  // The original went on; the copy still holds exactly the state at the copy …
+  ASSERT_EQ(snap->estimate().size(), atCopy.size());
+  for (int s = 0; s < atCopy.size(); ++s)
+    EXPECT_EQ(tangentDistance(atCopy, s, snap->estimate(), s), 0.0);
+  // … and its marginals equal those of a backend fed only up to the copy.
+  Isam2Backend upTo600;
+  feed(upTo600, prefix(p, 601));
+  const std::vector<Key> keys = {poseKey(0), poseKey(300), poseKey(600)};
+  const auto ms = snap->marginals(keys), mu = upTo600.marginals(keys);
+  for (size_t i = 0; i < keys.size(); ++i) EXPECT_LT((ms[i] - mu[i]).norm(), 1e-12 * mu[i].norm());
+  // The original equals a backend that was never copied.
+  Isam2Backend never;
+  feed(never, p);
+  for (int s = 0; s < never.estimate().size(); ++s)
+    EXPECT_EQ(tangentDistance(never.estimate(), s, a.estimate(), s), 0.0);
+  // 200 poses later most of the older tree is still one object for both.
+  std::unordered_set<const double*> seen;
+  const size_t together = a.cliqueStorageBytes(&seen) + snap->cliqueStorageBytes(&seen);
+  const size_t apart = a.cliqueStorageBytes() + snap->cliqueStorageBytes();
+  EXPECT_LT(together, 0.7 * apart) << together << " of " << apart << " bytes";
+}
+
 TEST(Isam2, InvalidUpdatesThrowAndChangeNothing) {
   const PoseGraphProblem p = prefix(load("intel.g2o"), 50);
   Isam2Backend isam;
