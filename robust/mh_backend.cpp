@@ -165,6 +165,11 @@ UpdateResult MhBackend::update(const BackendUpdate& u) {
   if (live_.size() == 1) live_.front().score = 0.0;  // scores only rank live hypotheses
   ++updates_;
   liveSum_ += static_cast<long>(live_.size());
+  // Sampled (it walks every live tree): the most the hypotheses held together.
+  if (live_.size() > 1 && updates_ % 16 == 0) {
+    const Storage s = cliqueStorage();
+    if (s.sharedBytes > peakStorage_.sharedBytes) peakStorage_ = s;
+  }
 
   if (best().tree.get() != bestBefore) {
     result.moved = estimate().keys();  // another hypothesis leads: everything may differ

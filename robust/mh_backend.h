@@ -1,13 +1,15 @@
 #pragma once
 // Multi-hypothesis incremental smoothing in the manner of MH-iSAM2 (Hsiao & Kaess, ICRA 2019):
 // every ambiguous measurement (k alternatives, optionally none) is a layer of a hypothesis
-// tree; each live hypothesis is one leaf, with the choice it made at every layer, its own
-// Bayes tree and a score. See ../../shared/ROBUST_NOTES.md §6 and robust/README.md.
+// tree; each live hypothesis is one leaf, with the choice it made at every layer, its view of
+// the Bayes tree and a score. See ../../shared/ROBUST_NOTES.md §6 and robust/README.md.
 //
-// Sharing: hypotheses share every factor object, the id bookkeeping and the validation; a
-// branch copies the parent's Bayes tree (copy on branch) and the last surviving child of a
-// parent takes the parent's tree itself. What is not shared is the tree numerics — unlike
-// MH-iSAM2, cliques do not carry per-hypothesis conditionals side by side.
+// Sharing: hypotheses share every factor object, the id bookkeeping and the validation. A
+// branch copies the parent's Isam2Backend, whose clique numerics are copy-on-write: the child
+// shares every clique with its parent until one of them re-eliminates it, so a clique whose
+// conditional does not depend on the choices is stored once and one that does carries one
+// conditional per hypothesis (MH-iSAM2's multi-hypothesis Bayes tree). The last surviving
+// child of a parent takes the parent's backend itself.
 //
 // Scoring: a hypothesis's score is its accumulated χ² increase — the innovation test
 // Δχ² = rᵀ(I + JΣJᵀ)⁻¹r of each uncertain factor against the hypothesis's own marginal Σ of
@@ -81,6 +83,9 @@ class MhBackend : public Backend {
     size_t unsharedBytes = 0;
   };
   Storage cliqueStorage() const;
+  /// The largest cliqueStorage() seen while several hypotheses lived (sampled every 16th
+  /// update).
+  Storage peakCliqueStorage() const { return peakStorage_; }
   /// Hypotheses built (branched) so far, and children never built because the prediction
   /// pruned them.
   long branchesBuilt() const { return branchesBuilt_; }
@@ -131,6 +136,7 @@ class MhBackend : public Backend {
   std::unordered_map<FactorId, int> layerIndex_;       // measurement id → layer
   std::unordered_map<int, double> certainTail_;  // residual dim → χ² tail of certain closures
   std::unordered_map<FactorId, int> ids_;  // factor id → −1 (plain) or its alternative's layer
+  Storage peakStorage_;
   long branchesBuilt_ = 0;
   long predictedAway_ = 0;
   long updates_ = 0;

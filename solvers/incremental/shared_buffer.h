@@ -13,7 +13,7 @@ class SharedBuffer {
   /// Storage for n doubles that this owner alone may write; the contents are undefined when
   /// it had to be (re)allocated (callers overwrite what they use).
   double* writable(size_t n) {
-    if (n > capacity_ || 4 * n + 4096 < capacity_ || p_.use_count() > 1) {
+    if (n > capacity_ || 2 * n + 256 < capacity_ || p_.use_count() > 1) {
       p_.reset(new double[n], std::default_delete<double[]>());
       capacity_ = n;
     }

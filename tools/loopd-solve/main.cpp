@@ -124,7 +124,7 @@ int run(const tools::SolveOptions& opt) {
     if (const auto* mh = dynamic_cast<const MhBackend*>(backend.get())) {
       std::vector<double> scores;
       for (const auto& h : mh->hypotheses(10)) scores.push_back(h.score);
-      const MhBackend::Storage storage = mh->cliqueStorage();
+      const MhBackend::Storage storage = mh->cliqueStorage(), peak = mh->peakCliqueStorage();
       stats.add("max_hypotheses", opt.maxHypotheses)
           .add("live_hypotheses", mh->liveHypotheses())
           .add("mean_live_hypotheses", mh->meanLiveHypotheses())
@@ -132,7 +132,9 @@ int run(const tools::SolveOptions& opt) {
           .add("branches_built", static_cast<std::int64_t>(mh->branchesBuilt()))
           .add("branches_predicted_away", static_cast<std::int64_t>(mh->branchesPredictedAway()))
           .add("clique_mb", storage.sharedBytes / 1e6)
-          .add("clique_mb_unshared", storage.unsharedBytes / 1e6);
+          .add("clique_mb_unshared", storage.unsharedBytes / 1e6)
+          .add("peak_clique_mb", peak.sharedBytes / 1e6)
+          .add("peak_clique_mb_unshared", peak.unsharedBytes / 1e6);
     }
     stats.add("peak_rss_mb", tools::peakRssMb());
     stats.writeFile(opt.stats);
