@@ -11,6 +11,80 @@
 
 namespace loopd {
 
+namespace {
+
+/// riSAM's SIG kernel at a fixed μ whose IRLS weight is taken at the inner backend's current
+/// ESTIMATE, not at the point it is linearized at. iSAM2 linearizes a (re-)added factor at its
+/// linearization point θ, which lags the estimate θ ⊕ Δ by up to the relinearization threshold;
+/// for a stiff closure (manhattan: 2e7 information on x) that lag alone is a χ² of 10⁴–10⁵, so a
+/// weight taken at θ switches the closure off at the μ = 1 step right after the convex step
+/// had fitted it (χ² 0.9 at the estimate) — a true closure rejected at arrival. Where the
+/// estimate lacks a variable (not yet added) the weight falls back to the evaluation point.
+class EstimateSigFactor final : public Factor {
+ public:
+  template <size_t... I>
+  EstimateSigFactor(std::index_sequence<I...>, FactorPtr inner, double mu, double c,
+                    const Values* at)
+      : Factor({{inner->key(I), inner->varType(I)}...}, inner->dim(), inner->role()),
+        inner_(std::move(inner)),
+        mu_(mu),
+        c_(c),
+        at_(at) {
+    setId(inner_->id());
+  }
+
+  void evaluate(const double* const* x, double* r, double* const* J) const override {
+    inner_->evaluate(x, r, J);
+    double c2 = 0.0;
+    for (int k = 0; k < dim(); ++k) c2 += r[k] * r[k];
+    const double e = chi2AtEstimate();
+    const double w = sigWeight(e >= 0.0 ? e : c2, mu_, c_);
+    const double s = std::sqrt(w);
+    for (int k = 0; k < dim(); ++k) r[k] *= s;
+    if (J == nullptr) return;
+    for (int i = 0; i < size(); ++i)
+      if (J[i] != nullptr)
+        for (int k = 0, n = dim() * varDim(varType(i)); k < n; ++k) J[i][k] *= s;
+  }
+  std::unique_ptr<Factor> clone() const override {
+    auto c = std::make_unique<EstimateSigFactor>(*this);
+    c->inner_ = inner_->clone();
+    return c;
+  }
+  const char* typeName() const override { return "Graduated"; }
+
+ private:
+  /// χ² of the inner factor at the estimate; −1 if a variable is missing there.
+  double chi2AtEstimate() const {
+    if (at_ == nullptr) return -1.0;
+    std::array<const double*, kMaxFactorKeys> xp{};
+    for (int i = 0; i < size(); ++i) {
+      const int s = at_->slot(key(i));
+      if (s < 0) return -1.0;
+      xp[i] = at_->data(s);
+    }
+    std::array<double, 4 * kMaxVarDim> r{};
+    if (dim() > static_cast<int>(r.size())) return -1.0;
+    inner_->evaluate(xp.data(), r.data(), nullptr);
+    double c2 = 0.0;
+    for (int k = 0; k < dim(); ++k) c2 += r[k] * r[k];
+    return c2;
+  }
+
+  FactorPtr inner_;
+  double mu_, c_;
+  const Values* at_;
+};
+
+template <size_t N>
+FactorPtr makeSig(const FactorPtr& f, double mu, double c, const Values* at, FactorId id) {
+  auto w = std::make_shared<EstimateSigFactor>(std::make_index_sequence<N>{}, f, mu, c, at);
+  w->setId(id);
+  return w;
+}
+
+}  // namespace
+
 RisamBackend::RisamBackend(std::unique_ptr<Backend> inner, RisamOptions options)
     : DecoratorBackend(std::move(inner), "RisamBackend"), options_(options) {}
 
@@ -21,6 +95,8 @@ BackendUpdate RisamBackend::regraduate(const std::vector<FactorId>& ids, double 
     step.removals.push_back(g.internalId);
     g.internalId = kInternalIdBit | nextInternal_++;
     g.wrapper = wrap(g.original, mu, g.internalId);
+    g.mu = mu;
+    g.decided = false;
     step.factors.push_back(g.wrapper);
   }
   return step;
@@ -63,15 +139,22 @@ void RisamBackend::refreshGate() {
   if (wider && t.gate > gate_) gate_ = t.gate;
 }
 
-std::shared_ptr<GraduatedFactor> RisamBackend::wrap(const FactorPtr& f, double mu,
-                                                    FactorId internal) const {
+FactorPtr RisamBackend::wrap(const FactorPtr& f, double mu, FactorId internal) const {
   const double c = std::sqrt(shapeSquared(f->dim()));
-  auto w = GraduatedFactor::make(f, mu, c);
-  w->setId(internal);
+  const Values* at = options_.weightAtEstimate ? &inner_->estimate() : nullptr;
+  FactorPtr w;
+  switch (f->size()) {
+    case 1: w = makeSig<1>(f, mu, c, at, internal); break;
+    case 2: w = makeSig<2>(f, mu, c, at, internal); break;
+    case 3: w = makeSig<3>(f, mu, c, at, internal); break;
+    case 4: w = makeSig<4>(f, mu, c, at, internal); break;
+    default: throw std::invalid_argument("risam: factor with " + std::to_string(f->size()) + " keys");
+  }
   return w;
 }
 
 UpdateResult RisamBackend::update(const BackendUpdate& u) {
+  restoreGraduated();  // after optimize(): every closure back to its SIG kernel at μ = 1
   size_t incoming = 0;
   for (const FactorPtr& f : u.factors)
     if (f && isUncertain(f->role())) ++incoming;
@@ -125,7 +208,8 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     Graduated g;
     g.original = f;
     g.internalId = newInternal();
-    g.wrapper = wrap(f, consistent ? 1.0 : options_.muInit, g.internalId);
+    g.mu = consistent ? 1.0 : options_.muInit;
+    g.wrapper = wrap(f, g.mu, g.internalId);
     first.factors.push_back(g.wrapper);
     active.push_back(g);
     activeIds.push_back(f->id());
@@ -152,7 +236,8 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
           Graduated n;
           n.original = g->second.original;
           n.internalId = newInternal();
-          n.wrapper = wrap(n.original, options_.muInit, n.internalId);
+          n.mu = options_.muInit;
+          n.wrapper = wrap(n.original, n.mu, n.internalId);
           first.factors.push_back(n.wrapper);
           active.push_back(n);
           activeIds.push_back(id);
@@ -212,16 +297,111 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
 }
 
 void RisamBackend::optimize() {
-  inner_->optimize();
+  if (graduated_.empty()) {
+    inner_->optimize();
+    return;
+  }
   gateAtCount_ = 0;
   refreshGate();
+  // Rejected closures that the map's own uncertainty explains are graduated again (online
+  // machinery: inner updates only).
   if (options_.retryRejected && graduated_.size() != retriedAtCount_) {
     retriedAtCount_ = graduated_.size();
     for (int round = 0; round < options_.retryRounds; ++round) {
-      if (retryRejected() == 0) break;
-      inner_->optimize();
+      const int nr = retryRejected();
+      if (nr == 0) break;
     }
   }
+  // Final least squares over the decisions: accepted closures (χ² ≤ the rejection threshold)
+  // at weight 1, rejected ones at 0, converged, decided again, until no decision changes.
+  decideAndSolve(nullptr);
+  // Rejected closures whose predicted increase of the least-squares cost, rᵀ(I + JΣJᵀ)⁻¹r at
+  // this optimum, is below what rejecting them costs in the truncated objective (their
+  // threshold) are put in at weight 1 together; kept if the truncated cost
+  // Σ_trusted χ² + Σ min(χ², threshold) went down at the new optimum, else taken out again.
+  for (int round = 0; round < options_.finalCandidateRounds; ++round) {
+    std::vector<FactorId> candidates;
+    int tested = 0;
+    for (FactorId id : rejected()) {
+      if (tested >= options_.retryMaxTests) break;
+      auto it = graduated_.find(id);
+      if (it == graduated_.end()) continue;
+      ++tested;
+      const Factor& f = *it->second.original;
+      if (predictedChi2(f) <= std::max(chi2Quantile(std::max(f.dim(), 1), options_.retryProbability),
+                                       rejectChi2(f.dim())))
+        candidates.push_back(id);
+    }
+    if (candidates.empty()) break;
+    const double before = truncatedCost();
+    decideAndSolve(&candidates);
+    const double after = truncatedCost();
+    if (after < before) continue;
+    std::unordered_set<FactorId> back(candidates.begin(), candidates.end());
+    forceDecisions(back, 0.0);
+    decideAndSolve(nullptr);
+    break;
+  }
+  finalized_ = true;
+}
+
+void RisamBackend::forceDecisions(const std::unordered_set<FactorId>& ids, double w) {
+  BackendUpdate step;
+  for (FactorId id : ids) {
+    auto it = graduated_.find(id);
+    if (it == graduated_.end()) continue;
+    setDecided(it->second, w, step);
+  }
+  if (!step.factors.empty()) inner_->update(step);
+}
+
+void RisamBackend::setDecided(Graduated& g, double w, BackendUpdate& step) {
+  step.removals.push_back(g.internalId);
+  g.internalId = kInternalIdBit | nextInternal_++;
+  auto wf = WeightedFactor::make(g.original, w);
+  wf->setId(g.internalId);
+  g.wrapper = wf;
+  g.decided = true;
+  g.mu = w;
+  step.factors.push_back(g.wrapper);
+}
+
+void RisamBackend::decideAndSolve(const std::vector<FactorId>* include) {
+  std::unordered_set<FactorId> forced;
+  if (include) forced.insert(include->begin(), include->end());
+  for (int round = 0; round < std::max(1, options_.finalRounds); ++round) {
+    const Values& x = inner_->estimate();
+    BackendUpdate step;
+    for (auto& [id, g] : graduated_) {
+      const bool accept = (round == 0 && forced.count(id)) ||
+                          g.original->chi2(x) <= rejectChi2(g.original->dim());
+      const double w = accept ? 1.0 : 0.0;
+      if (g.decided && g.mu == w) continue;
+      setDecided(g, w, step);
+    }
+    if (step.factors.empty() && round > 0) break;
+    if (!step.factors.empty()) inner_->update(step);
+    inner_->optimize();
+  }
+}
+
+double RisamBackend::truncatedCost() const {
+  const Values& x = inner_->estimate();
+  double c = 0.0;
+  for (const auto& f : originals_.factors()) {
+    const double e = f->chi2(x);
+    c += graduated_.count(f->id()) ? std::min(e, rejectChi2(f->dim())) : e;
+  }
+  return c;
+}
+
+void RisamBackend::restoreGraduated() {
+  if (!finalized_) return;
+  finalized_ = false;
+  std::vector<FactorId> ids;
+  for (const auto& [id, g] : graduated_)
+    if (g.decided) ids.push_back(id);
+  if (!ids.empty()) inner_->update(regraduate(ids, 1.0));
 }
 
 double RisamBackend::predictedChi2(const Factor& f) {
@@ -291,7 +471,11 @@ std::vector<std::pair<FactorId, double>> RisamBackend::decisions() const {
   const Values& x = inner_->estimate();
   for (const auto& f : originals_.factors()) {
     auto it = graduated_.find(f->id());
-    if (it != graduated_.end()) out.emplace_back(f->id(), it->second.wrapper->weightAt(x));
+    if (it != graduated_.end())
+      out.emplace_back(f->id(), it->second.decided
+                                    ? it->second.mu
+                                    : sigWeight(f->chi2(x), it->second.mu,
+                                                std::sqrt(shapeSquared(f->dim()))));
   }
   return out;
 }

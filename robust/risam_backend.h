@@ -18,6 +18,7 @@
 // paper's c = 3 was for 2D), or BackendOptions::robustParameter for every factor.
 #include <memory>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "robust/decorator_backend.h"
 #include "robust/robust_factors.h"
@@ -65,6 +66,15 @@ struct RisamOptions {
   int retryRounds = 3;
   double consistentFraction = 1.0;
   int gateMinSamples = 200;  // q99 needs a few hundred samples to mean anything
+  /// The SIG weight of a graduated factor is taken at the inner backend's current estimate
+  /// instead of the point it is linearized at (iSAM2's θ lags the estimate by up to its
+  /// relinearization threshold, which for a stiff closure is a χ² of 10⁴ and more).
+  bool weightAtEstimate = true;
+  /// optimize() ends with the least-squares solve over its decisions (accepted closures at
+  /// weight 1, rejected at 0), decided again at that optimum, at most this many rounds.
+  int finalRounds = 5;
+  /// Rounds of the final marginal-test candidates (rejected closures put back at weight 1).
+  int finalCandidateRounds = 3;
 };
 
 class RisamBackend : public DecoratorBackend {
@@ -88,8 +98,10 @@ class RisamBackend : public DecoratorBackend {
  private:
   struct Graduated {
     FactorPtr original;
-    std::shared_ptr<GraduatedFactor> wrapper;
+    FactorPtr wrapper;  // the SIG wrapper the inner backend holds
     FactorId internalId = 0;
+    double mu = 0.0;       // SIG μ, or the fixed weight (0/1) once decided
+    bool decided = false;  // optimize() put it in at a fixed weight
   };
   double nextMu(double mu) const;
   /// The inner update that re-adds each of ids at μ under a fresh internal id.
@@ -99,7 +111,16 @@ class RisamBackend : public DecoratorBackend {
   void refreshGate();
   double predictedChi2(const Factor& f);
   int retryRejected();
-  std::shared_ptr<GraduatedFactor> wrap(const FactorPtr& f, double mu, FactorId internal) const;
+  /// After optimize(): every decided closure back to its SIG kernel at μ = 1.
+  void restoreGraduated();
+  /// Installs 0/1 decisions (χ² test at the estimate; the ids in include forced to 1 in the
+  /// first round) and solves, until no decision changes (at most finalRounds).
+  void decideAndSolve(const std::vector<FactorId>* include);
+  void setDecided(Graduated& g, double w, BackendUpdate& step);
+  void forceDecisions(const std::unordered_set<FactorId>& ids, double w);  // no solve
+  /// Σ_trusted χ² + Σ_uncertain min(χ², rejection threshold) at the estimate.
+  double truncatedCost() const;
+  FactorPtr wrap(const FactorPtr& f, double mu, FactorId internal) const;
 
   RisamOptions options_;
   std::unordered_map<FactorId, Graduated> graduated_;          // original id → state
@@ -111,6 +132,7 @@ class RisamBackend : public DecoratorBackend {
   size_t retriedAtCount_ = 0;
   double gate_ = 0.0;             // noise-aware gate (normalized), 0 = defaults
   size_t gateAtCount_ = 0;        // number of uncertain factors at the last refresh
+  bool finalized_ = false;        // optimize() left decided (fixed-weight) closures in
  public:
   /// The noise-aware gate in use (χ²/χ²_dim(0.5) units; 0 = the χ²_dim defaults).
   double noiseGate() const { return gate_; }
