@@ -57,7 +57,24 @@ void GncBackend::updateWeights(const std::vector<double>& r2, const std::vector<
 
 void GncBackend::optimize() {
   if (graph_.empty()) return;
+  // The odometry start: the trusted factors' linear initialization (recomputed on every run;
+  // empty if there is none), one of the GNC's starting points.
+  Values odometryStart;
+  const bool wantOdometryStart = gnc_.odometryStart && gnc_.trustedInitialization &&
+                                 (firstSolve_ ? options_.linearInitialization : trustedInit_);
+  if (wantOdometryStart) {
+    FactorGraph trusted;
+    for (const auto& f : graph_.factors())
+      if (!isUncertain(f->role())) trusted.add(f);
+    Key anchor = 0;
+    bool found = false;
+    for (int s = 0; s < estimate_.size(); ++s)
+      if (keyKind(estimate_.key(s)) == KeyKind::Pose && (!found || estimate_.key(s) < anchor))
+        anchor = estimate_.key(s), found = true;
+    if (found && !trusted.empty()) odometryStart = initializeLinear(trusted, estimate_, anchor);
+  }
   if (firstSolve_ && options_.linearInitialization && gnc_.trustedInitialization) {
+    trustedInit_ = true;
     // Linear initialization from the trusted factors only; the base class must not redo it
     // with the outliers included.
     FactorGraph trusted;
@@ -68,7 +85,9 @@ void GncBackend::optimize() {
     for (int s = 0; s < estimate_.size(); ++s)
       if (keyKind(estimate_.key(s)) == KeyKind::Pose && (!found || estimate_.key(s) < anchor))
         anchor = estimate_.key(s), found = true;
-    if (found && !trusted.empty()) estimate_ = initializeLinear(trusted, estimate_, anchor);
+    if (found && !trusted.empty())
+      estimate_ = odometryStart.size() > 0 ? odometryStart
+                                           : initializeLinear(trusted, estimate_, anchor);
     options_.linearInitialization = false;
   }
   firstSolve_ = false;
@@ -92,15 +111,21 @@ void GncBackend::optimize() {
   OptimizerResult last;
   const bool noiseAware = gnc_.tailExponent >= 0.0 && options_.robustParameter <= 0.0;
 
-  // One GNC from `start` with thresholds c2: the plain least-squares solve, then the μ steps.
-  auto gncPass = [&](bool first) {
+  // One GNC with thresholds c2: from `start` (first: the current estimate) the plain
+  // least-squares solve, then the μ steps; or (fromOdometry) the μ steps straight from the
+  // odometry start, μ₀ set by the residuals there.
+  auto gncPass = [&](bool first, bool fromOdometry = false) {
     weights_.assign(n, 1.0);
-    if (!first) estimate_.assignFrom(start);
-    BatchBackend::optimize();  // plain least squares (all weights 1)
-    iterations += summary_.iterations;
-    if (first) initialChi2 = summary_.initialChi2;
-    last.finalChi2 = summary_.finalChi2;
-    last.converged = summary_.converged;
+    if (fromOdometry) {
+      estimate_.assignFrom(odometryStart);
+    } else {
+      if (!first) estimate_.assignFrom(start);
+      BatchBackend::optimize();  // plain least squares (all weights 1)
+      iterations += summary_.iterations;
+      if (first) initialChi2 = summary_.initialChi2;
+      last.finalChi2 = summary_.finalChi2;
+      last.converged = summary_.converged;
+    }
     outer_ = 0;
     if (!anyUncertain) return;
     residuals();
@@ -114,6 +139,11 @@ void GncBackend::optimize() {
       if (maxRatio <= 1.0) {
         mu_ = 0.0;
         reason = "gnc: every residual below the inlier threshold";
+        if (fromOdometry) {
+          last = solveOnce();
+          iterations += last.iterations;
+          residuals();
+        }
         return;
       }
       mu_ = std::max(1e-6, 1.0 / (2.0 * maxRatio - 1.0));
@@ -155,88 +185,189 @@ void GncBackend::optimize() {
   };
   gncPass(true);
   if (!anyUncertain) return;
-  if (noiseAware) {
-    // The tail of the accepted closures' normalized χ² (χ²/χ²_dim(0.5)) decides the gate.
+  const std::string firstReason = reason;
+  std::string log;  // what the candidates did (gncPass overwrites `reason`)
+  const std::vector<double> cbar = c2;  // the χ²_dim(p) thresholds
+  std::vector<double> gate = c2;        // the thresholds the candidates are judged by
+  // The noise-aware gate from the closures the current solution accepts: the tail of their
+  // normalized χ² (χ²/χ²_dim(0.5)). It acts (returns true, `out` set) when it is wider (heavy
+  // tail, manhattan: out = max(c̄², g·χ²_dim(0.5))) or, with `tighten`, tighter
+  // (under-confident information, every g·χ²_dim(0.5) below c̄²/widenFactor: parking-garage,
+  // intel; out = g·χ²_dim(0.5)) than c̄² by widenFactor.
+  auto estimateGate = [&](std::vector<double>& out) {
     std::vector<double> q;
     for (int i = 0; i < n; ++i)
-      if (c2[i] > 0.0 && weights_[i] >= 0.5)
+      if (cbar[i] > 0.0 && weights_[i] >= 0.5)
         q.push_back(r2[i] / chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5));
     const TailGate t = tailGate(q, gnc_.tailExponent, gnc_.medianFactor);
     scale_ = t.scale;
     tailGate_ = t.gate;
-    // Wider (heavy tail, manhattan) or tighter (under-confident information: every gate below
-    // c̄²/widenFactor, parking-garage, intel) than the χ²_dim(p) default by widenFactor.
     bool wider = false, tighter = t.gate > 0.0 && gnc_.tighten;
-    std::vector<double> gate(n, 0.0);
+    std::vector<double> g(n, 0.0);
     for (int i = 0; i < n; ++i)
-      if (c2[i] > 0.0) {
-        const double g = t.gate * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
-        gate[i] = std::max(c2[i], g);
-        if (gate[i] > gnc_.widenFactor * c2[i]) wider = true;
-        if (!(g * gnc_.widenFactor < c2[i])) tighter = false;
+      if (cbar[i] > 0.0) {
+        g[i] = t.gate * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
+        if (std::max(cbar[i], g[i]) > gnc_.widenFactor * cbar[i]) wider = true;
+        if (!(g[i] * gnc_.widenFactor < cbar[i])) tighter = false;
       }
-    if (!wider && tighter) {
-      for (int i = 0; i < n; ++i)
-        if (c2[i] > 0.0) gate[i] = t.gate * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
-      wider = true;  // same procedure: refine, redo with the gate, keep the cheaper
-    }
-    // Refinement: decide 0/1 against the gate at the current estimate, re-solve, repeat.
-    auto refine = [&] {
-      for (int it = 0; it < gnc_.maxRefineIterations; ++it) {
-        bool changed = false;
-        for (int i = 0; i < n; ++i) {
-          if (c2[i] <= 0.0) continue;
-          const double w = r2[i] <= gate[i] ? 1.0 : 0.0;
-          changed = changed || w != weights_[i];
-          weights_[i] = w;
-        }
-        if (!changed && it > 0) break;
-        ++refine_;
-        last = solveOnce();
-        iterations += last.iterations;
-        residuals();
-        if (!changed) break;
-      }
-    };
-    // The truncated cost both candidates minimize: trusted χ² + Σ min(χ², gate).
-    auto tlsCost = [&] {
-      double cost = 0.0;
-      for (int i = 0; i < n; ++i)
-        cost += c2[i] > 0.0 ? std::min(r2[i], gate[i]) : graph_[i]->chi2(estimate_);
-      return cost;
-    };
     if (wider) {
-      // Heavy-tailed closures (over-confident information): the χ²_dim(p) threshold may have
-      // dropped true closures in the GNC's non-convex phase. Candidate A: this GNC refined
-      // against the gate; candidate B: the GNC redone with c̄² = gate, refined. Keep the one
-      // with the lower truncated cost.
-      refine();
-      const double costA = tlsCost();
-      const Values estimateA = estimate_;
-      const std::vector<double> weightsA = weights_, r2A = r2;
-      const OptimizerResult lastA = last;
-      c2 = gate;
-      const int firstOuter = outer_;
+      out.assign(n, 0.0);
+      for (int i = 0; i < n; ++i) out[i] = cbar[i] > 0.0 ? std::max(cbar[i], g[i]) : 0.0;
+      return true;
+    }
+    if (tighter) {
+      out = g;
+      return true;
+    }
+    return false;
+  };
+  const bool gated = noiseAware && estimateGate(gate);  // refine, redo with the gate
+  // Refinement: decide 0/1 against the gate at the current estimate, re-solve, repeat.
+  auto refine = [&] {
+    for (int it = 0; it < gnc_.maxRefineIterations; ++it) {
+      bool changed = false;
+      for (int i = 0; i < n; ++i) {
+        if (c2[i] <= 0.0) continue;
+        const double w = r2[i] <= gate[i] ? 1.0 : 0.0;
+        changed = changed || w != weights_[i];
+        weights_[i] = w;
+      }
+      if (!changed && it > 0) break;
+      ++refine_;
+      last = solveOnce();
+      iterations += last.iterations;
+      residuals();
+      if (!changed) break;
+    }
+  };
+  // The truncated cost every candidate minimizes: trusted χ² + Σ min(χ², gate).
+  auto tlsCost = [&] {
+    double cost = 0.0;
+    for (int i = 0; i < n; ++i)
+      cost += c2[i] > 0.0 ? std::min(r2[i], gate[i]) : graph_[i]->chi2(estimate_);
+    return cost;
+  };
+  struct Candidate {
+    double cost;
+    Values estimate;
+    std::vector<double> weights, r2;
+    OptimizerResult last;
+  };
+  Candidate best;
+  std::string bestName, costs;
+  auto consider = [&](const std::string& name) {
+    const double cost = tlsCost();
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%s%s %.6g", costs.empty() ? "" : ", ", name.c_str(), cost);
+    costs += buf;
+    if (bestName.empty() || cost < best.cost) {
+      best = Candidate{cost, estimate_, weights_, r2, last};
+      bestName = name;
+    }
+  };
+  const bool odometryCandidate = odometryStart.size() == estimate_.size() && odometryStart.size() > 0;
+  if (gated || odometryCandidate) {
+    // Candidates, the one with the lowest truncated cost kept. A: the first GNC (refined
+    // against the gate). B (gate acting): the GNC redone from the same start with c̄² = gate —
+    // heavy-tailed closures (over-confident information) may have been dropped by the
+    // χ²_dim(p) threshold in the non-convex phase. C: the GNC from the odometry start (no
+    // least-squares solve with every closure: outliers cannot bend the start), with the same
+    // thresholds.
+    if (gated) refine();
+    consider("first");
+    const int firstOuter = outer_;
+    c2 = gate;
+    if (gated) {
       gncPass(false);
       outer_ += firstOuter;
       refine();
-      const double costB = tlsCost();
-      if (costA < costB) {
-        estimate_.assignFrom(estimateA);
-        weights_ = weightsA;
-        r2 = r2A;
-        last = lastA;
-        reason += "; GNC with the noise-aware gate tried, refined first GNC kept";
-      } else {
-        reason += "; redone with the noise-aware gate";
-      }
-      char cbuf[96];
-      std::snprintf(cbuf, sizeof cbuf, " (truncated cost %.6g vs %.6g)", costA, costB);
-      reason += cbuf;
+      consider("redone with the gate");
     }
-    char buf[128];
-    std::snprintf(buf, sizeof buf, "; noise scale %.3g, tail gate %.3g x chi2_dim(0.5), %d refinement solves",
-                  scale_, tailGate_, refine_);
+    if (odometryCandidate) {
+      const int before = outer_;
+      gncPass(false, true);
+      outer_ += before;
+      if (gated) refine();
+      consider("from odometry");
+    }
+    estimate_.assignFrom(best.estimate);
+    weights_ = best.weights;
+    r2 = best.r2;
+    last = best.last;
+    log += "; kept " + bestName + " (truncated costs " + costs + ")";
+    // The gate was estimated from the first GNC, whose solution outliers may have bent: its
+    // accepted closures' tail is then too wide. Re-estimate it from the kept solution; while
+    // it shrinks by more than widenFactor, refine the kept solution against it and redo the
+    // GNC from the odometry start with it, keep the cheaper (under the new gate).
+    int rounds = 0;
+    const double firstGate = tailGate_;
+    for (int round = 0; gated && round < gnc_.maxGateRounds; ++round) {
+      std::vector<double> next;
+      const double usedScale = scale_, usedGate = tailGate_;
+      bool shrinks = estimateGate(next);
+      for (int i = 0; i < n && shrinks; ++i)
+        if (cbar[i] > 0.0) shrinks = next[i] * gnc_.widenFactor < gate[i];
+      if (!shrinks) {
+        scale_ = usedScale, tailGate_ = usedGate;
+        break;
+      }
+      gate = next;
+      c2 = gate;
+      bestName.clear();
+      costs.clear();
+      refine();
+      consider("kept, refined");
+      if (odometryCandidate) {
+        const int before = outer_;
+        gncPass(false, true);
+        outer_ += before;
+        refine();
+        consider("from odometry");
+      }
+      estimate_.assignFrom(best.estimate);
+      weights_ = best.weights;
+      r2 = best.r2;
+      last = best.last;
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "; gate re-estimated: %.3g x chi2_dim(0.5), kept ", tailGate_);
+      log += buf + bestName + " (" + costs + ")";
+      ++rounds;
+    }
+    if (rounds > 0 && gnc_.readmit) {
+      // The shrunk gate is usually the median cap (medianFactor × the median): it got the
+      // solution out of the bent minimum, but true closures' tail can reach beyond it
+      // (parking-garage: the largest 208× the median). Now that the solution has settled,
+      // decide once more against the accepted closures' own tail extrapolation
+      // q99·(q99/q90)^tailExponent (no median cap), at most the first gate: rejected closures
+      // consistent with the solution come back.
+      std::vector<double> q;
+      for (int i = 0; i < n; ++i)
+        if (cbar[i] > 0.0 && weights_[i] >= 0.5)
+          q.push_back(r2[i] / chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5));
+      const TailGate t = tailGate(q, gnc_.tailExponent, 1e300);
+      const double g = std::min(t.gate, firstGate);
+      if (g > tailGate_) {
+        for (int i = 0; i < n; ++i)
+          if (cbar[i] > 0.0) gate[i] = g * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
+        c2 = gate;
+        int before = 0;
+        for (int i = 0; i < n; ++i) before += cbar[i] > 0.0 && weights_[i] < 0.5;
+        refine();
+        int after = 0;
+        for (int i = 0; i < n; ++i) after += cbar[i] > 0.0 && weights_[i] < 0.5;
+        char buf[128];
+        std::snprintf(buf, sizeof buf, "; re-check at the tail gate %.3g x chi2_dim(0.5): %d -> %d rejected",
+                      g, before, after);
+        log += buf;
+        tailGate_ = g;
+      }
+    }
+  }
+  reason = firstReason + log;
+  if (noiseAware) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "; noise scale %.3g, tail gate %.3g x chi2_dim(0.5)%s, %d refinement solves",
+                  scale_, tailGate_, gated ? " (acting)" : "", refine_);
     reason += buf;
   }
   summary_.iterations = iterations;

@@ -31,6 +31,10 @@ struct GncOptions {
   double rejectBelow = 0.5;
   /// Start from the trusted factors' linear initialization (outliers cannot bend it).
   bool trustedInitialization = true;
+  /// Also run the GNC from the odometry start (the trusted factors' linear initialization,
+  /// without the least-squares solve over every closure) and keep it if its truncated cost is
+  /// lower (needs trustedInitialization and a linear initialization).
+  bool odometryStart = true;
   /// Outer steps start from the previous solution (true) or, as GTSAM does, from the values
   /// the GNC started from (false).
   bool warmStart = true;
@@ -53,6 +57,13 @@ struct GncOptions {
   /// gate = g·χ²_dim(0.5) itself.
   bool tighten = true;
   int maxRefineIterations = 20;
+  /// Re-estimations of the gate from the kept solution (each while it shrinks by more than
+  /// widenFactor: a gate from a bent first solution is too wide).
+  int maxGateRounds = 3;
+  /// After gate rounds: decide once more against the accepted closures' uncapped tail
+  /// extrapolation (≤ the first gate), re-admitting rejected closures consistent with the
+  /// settled solution.
+  bool readmit = true;
 };
 
 /// Noise scale and tail gate of normalized χ² values q_i = χ²_i/χ²_{dim_i}(0.5): scale = the
@@ -95,6 +106,7 @@ class GncBackend : public BatchBackend {
   double scale_ = 0.0, tailGate_ = 0.0;
   int refine_ = 0;
   bool firstSolve_ = true;
+  bool trustedInit_ = false;
 };
 
 }  // namespace loopd
