@@ -10,17 +10,6 @@ RobustBackend::RobustBackend(std::string name, std::unique_ptr<Backend> inner,
                              RobustBackendOptions options)
     : DecoratorBackend(std::move(inner), "RobustBackend"), name_(std::move(name)), options_(options) {}
 
-FactorPtr RobustBackend::wrap(const FactorPtr& f, Key switchKey) const {
-  switch (options_.method) {
-    case RobustMethod::Kernel: return KernelFactor::make(f, options_.kernel, options_.parameter);
-    case RobustMethod::Switchable: return SwitchableFactor::make(f, switchKey);
-    case RobustMethod::MaxMixture:
-      return MaxMixtureFactor::make(f, options_.parameter > 0.0 ? options_.parameter : 1e-7,
-                                    options_.nullSigma);
-  }
-  return f;
-}
-
 UpdateResult RobustBackend::update(const BackendUpdate& u) {
   BackendUpdate inner;
   inner.initial = u.initial;
@@ -49,14 +38,11 @@ UpdateResult RobustBackend::update(const BackendUpdate& u) {
         if (inner.initial.contains(s) || inner_->estimate().contains(s))
           throw std::invalid_argument(name_ + ": switch key " + keyToString(s) + " in use");
         inner.initial.insertScalar(s, options_.switchPrior);
-        auto prior = std::make_shared<SwitchPriorFactor>(
-            s, options_.switchPrior, options_.parameter > 0.0 ? options_.parameter : 1.0);
-        prior->setId(f->id() | kInternalIdBit);
-        inner.factors.push_back(prior);
+        inner.factors.push_back(switchPrior(s, options_, f->id() | kInternalIdBit));
         newSwitches.emplace_back(f->id(), s);
       }
     }
-    FactorPtr w = wrap(f, s);
+    FactorPtr w = wrapFactor(f, options_, s);
     inner.factors.push_back(w);
     newWrapped.emplace_back(f->id(), w);
   }
@@ -73,23 +59,12 @@ UpdateResult RobustBackend::update(const BackendUpdate& u) {
   return result;
 }
 
-double RobustBackend::weightOf(const Factor& w) const {
-  const Values& x = inner_->estimate();
-  if (auto k = dynamic_cast<const KernelFactor*>(&w)) return k->weightAt(x);
-  if (auto s = dynamic_cast<const SwitchableFactor*>(&w)) {
-    const int slot = x.slot(s->switchKey());
-    return slot < 0 ? 1.0 : SwitchableFactor::psi(x.scalar(slot));
-  }
-  if (auto m = dynamic_cast<const MaxMixtureFactor*>(&w)) return m->nullChosenAt(x) ? 0.0 : 1.0;
-  return 1.0;
-}
-
 std::vector<std::pair<FactorId, double>> RobustBackend::decisions() const {
   std::vector<std::pair<FactorId, double>> out;
   out.reserve(wrapped_.size());
   for (const auto& f : originals_.factors()) {
     auto it = wrapped_.find(f->id());
-    if (it != wrapped_.end()) out.emplace_back(f->id(), weightOf(*it->second));
+    if (it != wrapped_.end()) out.emplace_back(f->id(), wrappedWeight(*it->second, inner_->estimate()));
   }
   return out;
 }

@@ -15,21 +15,12 @@
 #include <unordered_map>
 
 #include "robust/decorator_backend.h"
-#include "robust/robust_factors.h"
+#include "robust/robust_wrapping.h"
 
 namespace loopd {
 
-enum class RobustMethod { Kernel, Switchable, MaxMixture };
-
-struct RobustBackendOptions {
-  RobustMethod method = RobustMethod::Kernel;
-  KernelType kernel = KernelType::DCS;
-  /// Kernel: k (Huber/Cauchy/GM, on ‖r‖) or Φ (DCS); ≤ 0 → default.
-  /// Switchable: σ of the switch prior (default 1). MaxMixture: null weight (default 1e-7).
-  double parameter = 0.0;
-  double switchPrior = 1.0;      // γ
-  double nullSigma = 1.6e7;      // max-mixture null hypothesis: Σ₀ = σ₀²·Σ
-  double rejectBelow = 0.5;      // weight < this → rejected
+struct RobustBackendOptions : WrapSpec {
+  double rejectBelow = 0.5;  // weight < this → rejected
 };
 
 class RobustBackend : public DecoratorBackend {
@@ -48,8 +39,6 @@ class RobustBackend : public DecoratorBackend {
   static constexpr FactorId kInternalIdBit = FactorId{1} << 63;
 
  private:
-  FactorPtr wrap(const FactorPtr& f, Key switchKey) const;
-  double weightOf(const Factor& wrapped) const;
 
   std::string name_;
   RobustBackendOptions options_;

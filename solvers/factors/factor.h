@@ -26,6 +26,15 @@ inline bool isUncertain(FactorRole r) {
   return r == FactorRole::LoopClosure || r == FactorRole::Landmark;
 }
 
+/// What a sender asked for one factor's robust handling (the wire's `robust`, `robust_param`):
+/// "" = the solver's handling for its role, "none" = never down-weighted, or a robust
+/// variant's name with its parameter (0 = the variant's default). Solvers ignore it; the
+/// server's robust/per_factor_backend.h applies it.
+struct RobustRequest {
+  std::string variant;
+  double parameter = 0.0;
+};
+
 /// Jacobian buffer of one key: dim × varDim, column-major with leading dimension dim.
 using JacobianBlock = std::array<double, kMaxResidualDim * kMaxVarDim>;
 
@@ -43,6 +52,8 @@ class Factor {
   FactorId id() const { return id_; }
   void setId(FactorId id) { id_ = id; }
   void setRole(FactorRole r) { role_ = r; }
+  const RobustRequest& robustRequest() const { return robust_; }
+  void setRobustRequest(RobustRequest r) { robust_ = std::move(r); }
 
   /// x[i] → storage of key(i) (see Values). Writes dim() whitened residuals into r and, when
   /// J is non-null, each non-null J[i] with the dim()×varDim(i) whitened Jacobian.
@@ -69,6 +80,7 @@ class Factor {
   int dim_ = 0;
   FactorRole role_;
   FactorId id_ = 0;
+  RobustRequest robust_;
 };
 
 using FactorPtr = std::shared_ptr<const Factor>;
