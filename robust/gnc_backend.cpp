@@ -1,7 +1,9 @@
 #include "robust/gnc_backend.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <unordered_map>
 #include <cstdio>
 
 #include "robust/robust_factors.h"
@@ -361,6 +363,101 @@ void GncBackend::optimize() {
         log += buf;
         tailGate_ = g;
       }
+    }
+  }
+  if (gnc_.recheckRejected) {
+    // Final re-check of the rejected closures against the map's own uncertainty: accepting
+    // closure i raises the cost by about Δ = rᵀ(I + JΣJᵀ)⁻¹r (r, J whitened, Σ the joint
+    // marginal of its variables under the current weights) instead of its truncation gate_i.
+    // Those with Δ < gate_i would lower the truncated cost: accept them all, re-solve, refine
+    // against the gate, and keep the result if the truncated cost did drop (a stiff true
+    // closure left out of a locally misfit map: manhattan with 1000 outliers).
+    c2 = gate;
+    std::vector<int> cand;
+    for (int i = 0; i < n; ++i)
+      if (cbar[i] > 0.0 && weights_[i] < 0.5) cand.push_back(i);
+    std::vector<int> admit;
+    constexpr size_t kChunk = 64;
+    try {
+      for (size_t first = 0; first < cand.size(); first += kChunk) {
+        const size_t last = std::min(cand.size(), first + kChunk);
+        std::vector<Key> keys;
+        std::unordered_map<Key, int> col;  // key → first column in the joint marginal
+        int cols = 0;
+        for (size_t c = first; c < last; ++c) {
+          const Factor& f = *graph_[cand[c]];
+          for (int k = 0; k < f.size(); ++k)
+            if (col.emplace(f.key(k), cols).second) {
+              keys.push_back(f.key(k));
+              cols += varDim(f.varType(k));
+            }
+        }
+        const Eigen::MatrixXd sigma = marginalCovariance(keys);
+        if (sigma.rows() != cols) break;
+        for (size_t c = first; c < last; ++c) {
+          const Factor& f = *graph_[cand[c]];
+          std::array<const double*, kMaxFactorKeys> xp{};
+          std::array<JacobianBlock, kMaxFactorKeys> jb{};
+          std::array<double*, kMaxFactorKeys> jp{};
+          std::vector<int> at;
+          int fc = 0;
+          bool ok = true;
+          for (int k = 0; k < f.size(); ++k) {
+            const int slot = estimate_.slot(f.key(k));
+            if (slot < 0) ok = false;
+            else xp[k] = estimate_.data(slot);
+            jp[k] = jb[k].data();
+            fc += varDim(f.varType(k));
+          }
+          if (!ok) continue;
+          const int d = f.dim();
+          Eigen::VectorXd r(d);
+          f.evaluate(xp.data(), r.data(), jp.data());
+          Eigen::MatrixXd J(d, fc), S(fc, fc);
+          std::vector<int> off(f.size()), len(f.size());
+          for (int k = 0, c0 = 0; k < f.size(); c0 += varDim(f.varType(k)), ++k) {
+            off[k] = c0;
+            len[k] = varDim(f.varType(k));
+            J.middleCols(c0, len[k]) = Eigen::Map<const Eigen::MatrixXd>(jb[k].data(), d, len[k]);
+          }
+          for (int a = 0; a < f.size(); ++a)
+            for (int b = 0; b < f.size(); ++b)
+              S.block(off[a], off[b], len[a], len[b]) =
+                  sigma.block(col[f.key(a)], col[f.key(b)], len[a], len[b]);
+          const Eigen::MatrixXd cov = Eigen::MatrixXd::Identity(d, d) + J * S * J.transpose();
+          Eigen::LDLT<Eigen::MatrixXd> ldlt(cov);
+          if (ldlt.info() != Eigen::Success) continue;
+          if (r.dot(ldlt.solve(r)) < gate[cand[c]]) admit.push_back(cand[c]);
+        }
+      }
+    } catch (const std::exception&) {
+      admit.clear();
+    }
+    if (!admit.empty()) {
+      const double before = tlsCost();
+      const Values keptEstimate = estimate_;
+      const std::vector<double> keptWeights = weights_, keptR2 = r2;
+      const OptimizerResult keptLast = last;
+      for (int i : admit) weights_[i] = 1.0;
+      ++refine_;
+      last = solveOnce();
+      iterations += last.iterations;
+      residuals();
+      refine();
+      const double after = tlsCost();
+      char buf[160];
+      if (after < before) {
+        std::snprintf(buf, sizeof buf, "; re-check: %zu rejected closures fit the map's uncertainty, kept (truncated cost %.6g -> %.6g)",
+                      admit.size(), before, after);
+      } else {
+        estimate_.assignFrom(keptEstimate);
+        weights_ = keptWeights;
+        r2 = keptR2;
+        last = keptLast;
+        std::snprintf(buf, sizeof buf, "; re-check: %zu rejected closures tried, dropped (truncated cost %.6g vs %.6g)",
+                      admit.size(), before, after);
+      }
+      log += buf;
     }
   }
   reason = firstReason + log;

@@ -64,6 +64,9 @@ struct GncOptions {
   /// extrapolation (≤ the first gate), re-admitting rejected closures consistent with the
   /// settled solution.
   bool readmit = true;
+  /// Finally, re-admit rejected closures whose predicted cost rᵀ(I + JΣJᵀ)⁻¹r (Σ: joint
+  /// marginal of their variables) is below their gate, if that lowers the truncated cost.
+  bool recheckRejected = true;
 };
 
 /// Noise scale and tail gate of normalized χ² values q_i = χ²_i/χ²_{dim_i}(0.5): scale = the
