@@ -11,8 +11,6 @@
 
 namespace loopd {
 
-namespace {
-
 /// riSAM's SIG kernel at a fixed μ whose IRLS weight is taken at the inner backend's current
 /// ESTIMATE, not at the point it is linearized at. iSAM2 linearizes a (re-)added factor at its
 /// linearization point θ, which lags the estimate θ ⊕ Δ by up to the relinearization threshold;
@@ -20,10 +18,10 @@ namespace {
 /// weight taken at θ switches the closure off at the μ = 1 step right after the convex step
 /// had fitted it (χ² 0.9 at the estimate) — a true closure rejected at arrival. Where the
 /// estimate lacks a variable (not yet added) the weight falls back to the evaluation point.
-class EstimateSigFactor final : public Factor {
+class RisamSigFactor final : public Factor {
  public:
   template <size_t... I>
-  EstimateSigFactor(std::index_sequence<I...>, FactorPtr inner, double mu, double c,
+  RisamSigFactor(std::index_sequence<I...>, FactorPtr inner, double mu, double c,
                     const Values* at)
       : Factor({{inner->key(I), inner->varType(I)}...}, inner->dim(), inner->role()),
         inner_(std::move(inner)),
@@ -47,11 +45,13 @@ class EstimateSigFactor final : public Factor {
         for (int k = 0, n = dim() * varDim(varType(i)); k < n; ++k) J[i][k] *= s;
   }
   std::unique_ptr<Factor> clone() const override {
-    auto c = std::make_unique<EstimateSigFactor>(*this);
+    auto c = std::make_unique<RisamSigFactor>(*this);
     c->inner_ = inner_->clone();
     return c;
   }
   const char* typeName() const override { return "Graduated"; }
+  /// μ changed in place: takes effect where the factor is next linearized.
+  void setMu(double mu) const { mu_ = mu; }
 
  private:
   /// χ² of the inner factor at the estimate; −1 if a variable is missing there.
@@ -72,13 +72,16 @@ class EstimateSigFactor final : public Factor {
   }
 
   FactorPtr inner_;
-  double mu_, c_;
+  mutable double mu_;
+  double c_;
   const Values* at_;
 };
 
+namespace {
+
 template <size_t N>
 FactorPtr makeSig(const FactorPtr& f, double mu, double c, const Values* at, FactorId id) {
-  auto w = std::make_shared<EstimateSigFactor>(std::make_index_sequence<N>{}, f, mu, c, at);
+  auto w = std::make_shared<RisamSigFactor>(std::make_index_sequence<N>{}, f, mu, c, at);
   w->setId(id);
   return w;
 }
@@ -215,6 +218,11 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     activeIds.push_back(f->id());
     inActive.insert(f->id());
   }
+  // Existing uncertain factors sharing a variable with the new ones (riSAM resets them to
+  // μ_init with the arrival). With lazyNeighbours they are only reset if the arrival is not
+  // absorbed at its own convex step or that step pushed one of them out (below).
+  std::vector<FactorId> neighbours;
+  std::vector<double> neighbourChi2;  // before the update, at the estimate
   if (options_.graduateNeighbours && !active.empty() && !consistent) {
     const size_t numNew = active.size();
     for (size_t a = 0; a < numNew; ++a) {
@@ -232,6 +240,11 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
           auto g = graduated_.find(id);
           if (g == graduated_.end()) continue;
           inActive.insert(id);
+          if (options_.lazyNeighbours) {
+            neighbours.push_back(id);
+            neighbourChi2.push_back(g->second.original->chi2(inner_->estimate()));
+            continue;
+          }
           first.removals.push_back(g->second.internalId);
           Graduated n;
           n.original = g->second.original;
@@ -265,32 +278,69 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
       ids.erase(std::remove_if(ids.begin(), ids.end(),
                                [&](FactorId id) { return !graduated_.count(id); }),
                 ids.end());
+  if (active.empty() || consistent) return result;
 
-  // Graduate the active set: each step re-adds its factors at the next μ.
-  if (!active.empty() && !consistent) {
-    double mu = options_.muInit;
-    int extra = options_.extraIterations;
-    // Absorbed at the convex step: every active factor already fits the new estimate, so the
-    // graduation could only confirm it; go straight to μ = 1 (one step instead of five).
-    if (options_.acceptAbsorbed) {
-      const Values& x = inner_->estimate();
-      bool absorbed = true;
-      for (size_t a = 0; a < active.size() && absorbed; ++a)
-        absorbed = active[a].original->chi2(x) <=
-                   options_.absorbedFraction * rejectChi2(active[a].original->dim());
-      if (absorbed) {
-        mu = 1.0;
-        extra = 0;
-        ++absorbedUpdates_;
+  auto step = [&](const BackendUpdate& s) {
+    const UpdateResult r = inner_->update(s);
+    result.seconds += r.seconds;
+    result.relinearized += r.relinearized;
+    ++lastInnerUpdates_;
+  };
+  // Absorbed: every active factor fits the current estimate well inside its test (and no
+  // neighbour left out of the convex step was pushed out by it), so the rest of the schedule
+  // could only confirm it; go straight to μ = 1 — in place where that changes the SIG weight
+  // at the estimate by at most promoteTolerance (the cached linearization is then close
+  // enough; the next relinearization uses μ = 1), else by re-adding.
+  auto absorbedNow = [&](bool checkNeighbours) {
+    if (!options_.acceptAbsorbed) return false;
+    const Values& x = inner_->estimate();
+    for (FactorId id : activeIds) {
+      const Factor& f = *graduated_[id].original;
+      if (!(f.chi2(x) <= options_.absorbedFraction * rejectChi2(f.dim()))) return false;
+    }
+    if (checkNeighbours)
+      for (size_t n = 0; n < neighbours.size(); ++n) {
+        const Factor& f = *graduated_[neighbours[n]].original;
+        const double thr = rejectChi2(f.dim());
+        if (f.chi2(x) > thr && neighbourChi2[n] <= thr) return false;
+      }
+    return true;
+  };
+  auto promote = [&]() {
+    const Values& x = inner_->estimate();
+    std::vector<FactorId> readd;
+    for (FactorId id : activeIds) {
+      Graduated& g = graduated_[id];
+      const double c2 = g.original->chi2(x), c = std::sqrt(shapeSquared(g.original->dim()));
+      const double w0 = sigWeight(c2, g.mu, c), w1 = sigWeight(c2, 1.0, c);
+      if (std::abs(w1 - w0) <= options_.promoteTolerance * w0) {
+        static_cast<const RisamSigFactor&>(*g.wrapper).setMu(1.0);
+        g.mu = 1.0;
+      } else {
+        readd.push_back(id);
       }
     }
-    while (mu < 1.0 || extra-- > 0 || lastInnerUpdates_ == 1) {
-      mu = nextMu(mu);
-      const BackendUpdate step = regraduate(activeIds, mu);
-      const UpdateResult r = inner_->update(step);
-      result.seconds += r.seconds;
-      result.relinearized += r.relinearized;
-      ++lastInnerUpdates_;
+    if (!readd.empty()) step(regraduate(readd, 1.0));
+  };
+  if (absorbedNow(true)) {
+    ++absorbedUpdates_;
+    promote();
+    return result;
+  }
+  // Not absorbed: the neighbours join the active set at μ_init (one more convex step), then
+  // the schedule, cut short once everything is absorbed.
+  if (!neighbours.empty()) {
+    step(regraduate(neighbours, options_.muInit));
+    activeIds.insert(activeIds.end(), neighbours.begin(), neighbours.end());
+  }
+  double mu = options_.muInit;
+  int extra = options_.extraIterations;
+  while (mu < 1.0 || extra-- > 0) {
+    mu = nextMu(mu);
+    step(regraduate(activeIds, mu));
+    if (mu < 1.0 && absorbedNow(false)) {
+      promote();
+      break;
     }
   }
   return result;

@@ -25,6 +25,8 @@
 
 namespace loopd {
 
+class RisamSigFactor;  // the SIG wrapper (risam_backend.cpp)
+
 struct RisamOptions {
   double shape = 0.0;     // c; ≤ 0: √χ²_dim(0.95) (BackendOptions::robustParameter overrides)
   double muInit = 0.0;
@@ -75,6 +77,14 @@ struct RisamOptions {
   int finalRounds = 5;
   /// Rounds of the final marginal-test candidates (rejected closures put back at weight 1).
   int finalCandidateRounds = 3;
+  /// Neighbours (uncertain factors sharing a variable with an arrival) are reset to μ_init
+  /// only when the arrival is not absorbed at its convex step or that step pushed one of them
+  /// over its rejection threshold; otherwise they keep their state (no re-add, no
+  /// relinearization of their far ends).
+  bool lazyNeighbours = true;
+  /// An absorbed arrival goes from μ_init to μ = 1 in place (no inner update) when that
+  /// changes its SIG weight at the estimate by at most this fraction.
+  double promoteTolerance = 0.5;
 };
 
 class RisamBackend : public DecoratorBackend {
