@@ -184,11 +184,6 @@ void FactorBatchValidator::checkAmbiguous(const loopd::ambiguous_factor_t& a,
     if (f.role != F::ROLE_LOOP_CLOSURE && f.role != F::ROLE_LANDMARK)
       bad(E::INVALID_FIELD, "alternative " + std::to_string(i) +
                                 ": role must be ROLE_LOOP_CLOSURE or ROLE_LANDMARK");
-    if (f.num_keys == 2 && f.keys[0].robot != f.keys[1].robot)
-      bad(E::INVALID_FIELD, "alternative " + std::to_string(i) + " joins robots " +
-                                std::to_string(f.keys[0].robot) + " and " +
-                                std::to_string(f.keys[1].robot) +
-                                ": inter-robot alternatives are not supported yet");
   }
   if (out.size() != before || k < 1 || k > A::MAX_ALTERNATIVES) return;
   // Every alternative well-formed: the group's own rules.
@@ -354,6 +349,31 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
       for (int i = 0; i < f.num_keys; ++i)
         use(toKey(f.keys[static_cast<size_t>(i)]), slotVarType(f.type, i), a.id,
             "ambiguous " + std::to_string(a.id) + " " + itemName(f, a.id));
+  // Inter-robot alternatives: an alternative cannot create the anchor that joins two robots'
+  // frames (under "none" or another alternative the anchor would be unconstrained, and each
+  // alternative implies another anchor value), so its robots must already share a frame
+  // through certain inter-robot factors (earlier ones or this batch's own).
+  std::optional<std::map<std::uint32_t, std::uint32_t>> frames;
+  auto frameOf = [&](std::uint32_t r) {
+    const auto it = frames->find(r);
+    return it == frames->end() ? r : it->second;
+  };
+  for (const auto& a : b.ambiguous)
+    for (size_t i = 0; i < a.alternatives.size(); ++i) {
+      const F& f = a.alternatives[i];
+      if (f.num_keys != 2 || f.keys[0].robot == f.keys[1].robot) continue;
+      if (!frames) frames = g.frameGroups(b);
+      const auto r = static_cast<std::uint32_t>(f.keys[0].robot);
+      const auto s = static_cast<std::uint32_t>(f.keys[1].robot);
+      if (frameOf(r) == frameOf(s)) continue;
+      out.push_back({a.id, E::INVALID_FIELD,
+                     "ambiguous " + std::to_string(a.id) + " alternative " + std::to_string(i) +
+                         " joins robots " + std::to_string(r) + " and " + std::to_string(s) +
+                         ", which no certain inter-robot factor has joined yet: an ambiguous "
+                         "alternative cannot be the first link between two robots' frames; "
+                         "send a certain inter-robot loop closure (factor_t) first"});
+      break;  // one issue per group
+    }
   for (const auto& v : b.initial_values) {
     const VarType t = v.type == loopd::initial_value_t::SE2   ? VarType::SE2
                       : v.type == loopd::initial_value_t::SE3 ? VarType::SE3

@@ -5,6 +5,7 @@
 // variable types consistent with the graph). A batch is accepted only with no issue at all;
 // every issue becomes one error_t.
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -32,6 +33,15 @@ class GraphView {
   virtual bool idUsed(const std::string& sender, std::int64_t id) const = 0;
   /// Whether this sender's id names a live factor or ambiguous group.
   virtual bool idLive(const std::string& sender, std::int64_t id) const = 0;
+  /// The robots' common frames as they will be once `batch` is applied: robot → a
+  /// representative of the robots it is joined to through certain (non-ambiguous) inter-robot
+  /// factors (those in the graph or staged, minus the batch's removals, plus the batch's own).
+  /// A robot not listed is alone in its own frame. Only asked for when the batch has an
+  /// inter-robot ambiguous alternative.
+  virtual std::map<std::uint32_t, std::uint32_t> frameGroups(
+      const loopd::factor_batch_t& /*batch*/) const {
+    return {};
+  }
 };
 
 class FactorBatchValidator {
@@ -43,7 +53,8 @@ class FactorBatchValidator {
   /// Checks of one ambiguous group: mode, number of alternatives, null weight, every
   /// alternative as a factor, and the mode's rules (same keys / same measurement and noise).
   void checkAmbiguous(const loopd::ambiguous_factor_t& a, std::vector<Issue>& out) const;
-  /// Checks against the graph: ids, removals, variable types. Run after check() passed.
+  /// Checks against the graph: ids, removals, variable types, and inter-robot ambiguous
+  /// alternatives only between robots already in one common frame. Run after check() passed.
   std::vector<Issue> checkContext(const loopd::factor_batch_t& batch, const GraphView& graph) const;
 };
 

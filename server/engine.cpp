@@ -87,6 +87,25 @@ bool isInterRobot(const W& f) {
   return (f.type == W::BETWEEN_SE2 || f.type == W::BETWEEN_SE3) && f.keys[0].robot != f.keys[1].robot;
 }
 
+// An inter-robot between factor (`built` = its intra-robot form) evaluated through the robots'
+// anchors: keys A_r, x_r, A_s, x_s. The anchors must exist (joinRobots).
+std::shared_ptr<Factor> anchoredFactor(const W& wf, const Factor& built) {
+  const Key xr = toKey(wf.keys[0]), xs = toKey(wf.keys[1]);
+  const Key ar = anchorKey(keyRobot(xr)), as = anchorKey(keyRobot(xs));
+  const Eigen::MatrixXd info = informationOf(wf);
+  if (wf.type == W::BETWEEN_SE2) {
+    const auto& bf = static_cast<const BetweenFactorSE2&>(built);
+    return std::make_shared<AnchoredBetweenFactorSE2>(ar, xr, as, xs, bf.measured(),
+                                                      Eigen::Matrix3d(info), FactorRole::LoopClosure);
+  }
+  const auto& bf = static_cast<const BetweenFactorSE3&>(built);
+  return std::make_shared<AnchoredBetweenFactorSE3>(ar, xr, as, xs, bf.measured(), Mat6(info),
+                                                    FactorRole::LoopClosure);
+}
+
+// The robots an anchored (inter-robot) factor joins; commit() records those as interEdges_.
+bool isAnchored(const Factor& f) { return f.size() == 4; }
+
 std::string fingerprintName(std::int64_t hash) {
   struct T { std::int64_t h; const char* n; };
   const T known[] = {{loopd::command_t::getHash(), "command_t"},
@@ -175,6 +194,37 @@ std::optional<VarType> Engine::robotPoseType(std::uint32_t robot) const {
 
 bool Engine::idUsed(const std::string& s, std::int64_t id) const { return sessions_.idUsed(s, id); }
 bool Engine::idLive(const std::string& s, std::int64_t id) const { return sessions_.idLive(s, id); }
+
+std::map<std::uint32_t, std::uint32_t> Engine::frameGroups(const loopd::factor_batch_t& b) const {
+  // From the certain inter-robot factors themselves (not robots_' parents, which regroup()
+  // updates only after a round), so the answer depends on the order of batches alone, not on
+  // how they were coalesced into rounds: a journal replay decides exactly as the live run.
+  std::map<FactorId, std::pair<std::uint32_t, std::uint32_t>> edges = interEdges_;
+  for (const Staged& s : staged_) {
+    for (FactorId r : s.update.removals) edges.erase(r);
+    for (const auto& f : s.update.factors)
+      if (isAnchored(*f)) edges[f->id()] = {keyRobot(f->key(1)), keyRobot(f->key(3))};
+  }
+  for (std::int64_t rid : b.remove_ids)
+    if (const auto fid = sessions_.liveId(b.sender, rid)) edges.erase(*fid);
+  std::map<std::uint32_t, std::uint32_t> parent;
+  auto find = [&](std::uint32_t r) {
+    if (!parent.count(r)) parent[r] = r;
+    while (parent[r] != r) r = parent[r] = parent[parent[r]];
+    return r;
+  };
+  auto join = [&](std::uint32_t r, std::uint32_t s) {
+    const std::uint32_t a = find(r), c = find(s);
+    if (a != c) parent[std::max(a, c)] = std::min(a, c);
+  };
+  for (const auto& [id, e] : edges) join(e.first, e.second);
+  for (const auto& f : b.factors)
+    if (isInterRobot(f))
+      join(static_cast<std::uint32_t>(f.keys[0].robot), static_cast<std::uint32_t>(f.keys[1].robot));
+  std::map<std::uint32_t, std::uint32_t> out;
+  for (const auto& [r, p] : parent) out[r] = find(r);
+  return out;
+}
 
 std::uint32_t Engine::root(std::uint32_t r) const {
   for (int guard = 0; guard < 1 << 20; ++guard) {
@@ -483,17 +533,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     if (isInterRobot(wf)) {
       const Key xr = toKey(wf.keys[0]), xs = toKey(wf.keys[1]);
       joinRobots(keyRobot(xr), keyRobot(xs), xr, xs, *built[i], batchValues, st);
-      const Key ar = anchorKey(keyRobot(xr)), as = anchorKey(keyRobot(xs));
-      const Eigen::MatrixXd info = informationOf(wf);
-      if (wf.type == W::BETWEEN_SE2) {
-        const auto& bf = static_cast<const BetweenFactorSE2&>(*built[i]);
-        f = std::make_shared<AnchoredBetweenFactorSE2>(ar, xr, as, xs, bf.measured(),
-                                                       Eigen::Matrix3d(info), FactorRole::LoopClosure);
-      } else {
-        const auto& bf = static_cast<const BetweenFactorSE3&>(*built[i]);
-        f = std::make_shared<AnchoredBetweenFactorSE3>(ar, xr, as, xs, bf.measured(), Mat6(info),
-                                                       FactorRole::LoopClosure);
-      }
+      f = anchoredFactor(wf, *built[i]);
     }
     const FactorId id = newFactorId();
     std::const_pointer_cast<Factor>(f)->setId(id);
@@ -503,7 +543,9 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     st.addedIds.emplace_back(wf.id, id);
   }
   // Ambiguous groups: each alternative is built like a factor_t and gets an internal id of
-  // its own; the group's internal id is what the sender's id maps to.
+  // its own; the group's internal id is what the sender's id maps to. An inter-robot
+  // alternative goes through the anchors of its robots, which certain inter-robot factors
+  // joined before (checkContext refused the batch otherwise); it never joins robots itself.
   for (const auto& wa : b.ambiguous) {
     Group g;
     g.sender = b.sender;
@@ -513,6 +555,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     g.factor.nullWeight = wa.null_hypothesis && wa.null_weight > 0.0 ? wa.null_weight : 1.0;
     for (const auto& wf : wa.alternatives) {
       std::shared_ptr<Factor> f = buildFactor(wf);
+      if (isInterRobot(wf)) f = anchoredFactor(wf, *f);
       f->setId(newFactorId());
       g.factor.alternatives.push_back(std::move(f));
     }
@@ -689,7 +732,7 @@ void Engine::commit(Staged& s) {
   for (size_t i = 0; i < s.update.factors.size(); ++i) {
     const FactorPtr& f = s.update.factors[i];
     live_[f->id()] = f;
-    if (f->size() == 4) interEdges_[f->id()] = {keyRobot(f->key(1)), keyRobot(f->key(3))};
+    if (isAnchored(*f)) interEdges_[f->id()] = {keyRobot(f->key(1)), keyRobot(f->key(3))};
     if (s.owners[i].id >= 0) {
       owners_[f->id()] = s.owners[i];
       if (s.owners[i].uncertain) ++loopClosures_;

@@ -15,6 +15,12 @@
 // root prior (its anchors then follow the factor). Removing inter-robot factors regroups the
 // robots; a group left without a root prior gets one at its current value. Estimates are
 // published as A_r ⊕ x_r.
+//
+// An ambiguous alternative never creates an anchor (under "none" or another alternative it
+// would be unconstrained, and each alternative implies another anchor value): an inter-robot
+// alternative is accepted only between robots already joined by certain inter-robot factors
+// (checkContext asks frameGroups) and is built as an AnchoredBetweenFactor like a certain
+// one. Alternatives never join or split groups (regroup looks at certain factors only).
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -137,6 +143,7 @@ class Engine : private GraphView {
   std::optional<VarType> robotPoseType(std::uint32_t robot) const override;
   bool idUsed(const std::string& sender, std::int64_t id) const override;
   bool idLive(const std::string& sender, std::int64_t id) const override;
+  std::map<std::uint32_t, std::uint32_t> frameGroups(const loopd::factor_batch_t& b) const override;
 
   void handleFactors(std::shared_ptr<const Inbound> m, bool replayed);
   void handleCommand(const Inbound& m);

@@ -1,7 +1,8 @@
 // Ambiguous measurements (ambiguous_factor_t) through the server: validation, the engine with
 // mh (status fields, REQUEST_HYPOTHESES, removal, SWITCH_SOLVER, journal resume), flattening
-// for the other variants, --max-hypotheses. The engine is driven directly (no LCM); the last
-// test runs loopd over real LCM with the client library.
+// for the other variants, inter-robot alternatives (through the anchors of robots already
+// joined; refused as a first link), --max-hypotheses. The engine is driven directly (no LCM);
+// the last tests run loopd over real LCM.
 #include <gtest/gtest.h>
 #include <lcm/lcm-cpp.hpp>
 
@@ -171,6 +172,12 @@ TEST(AmbiguousValidation, WellFormedGroupsPass) {
                   .empty());
   EXPECT_TRUE(v.check(batch("a", 1, {}, {group(1, A::MULTI_MEASUREMENT, {closure(0, 9, 0, {0, 0, 0})}, true, 2.5)}))
                   .empty());
+  // Inter-robot alternatives are well-formed; whether their robots share a frame is a
+  // contextual check (AmbiguousInterRobot tests).
+  factor_t inter = closure(0, 9, 4, {0, 0, 0});
+  inter.keys[1].robot = 2;
+  EXPECT_TRUE(v.check(batch("a", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 9, 0, {0, 0, 0}), inter})}))
+                  .empty());
 }
 
 TEST(AmbiguousValidation, EachBadGroupGetsItsCode) {
@@ -205,7 +212,6 @@ TEST(AmbiguousValidation, EachBadGroupGetsItsCode) {
       {"association, different noise", [](A& a) { a.alternatives[1].noise[0] = 7; }, loopd::error_t::INVALID_FIELD},
       {"association, same keys twice", [](A& a) { a.alternatives[1].keys = a.alternatives[0].keys; }, loopd::error_t::INVALID_FIELD},
       {"measurement mode, different keys", [](A& a) { a.mode = A::MULTI_MEASUREMENT; }, loopd::error_t::INVALID_FIELD},
-      {"inter-robot alternative", [](A& a) { a.alternatives[1].keys[1].robot = 2; }, loopd::error_t::INVALID_FIELD},
       {"negative id", [](A& a) { a.id = -4; }, loopd::error_t::INVALID_FIELD},
   };
   for (const auto& c : cases) {
@@ -528,6 +534,382 @@ TEST(AmbiguousEngine, JournalResumeReplaysTheGroups) {
   std::remove(path.c_str());
 }
 
+// --- inter-robot alternatives --------------------------------------------------------------
+
+factor_t inter(int ra, std::int64_t a, int rb, std::int64_t b, Pose2 z, std::int64_t id = 0) {
+  factor_t f = client::loopClosureFactor(KeyRef::pose(ra, a), KeyRef::pose(rb, b), z, kInfo);
+  f.id = id;
+  return f;
+}
+
+std::vector<double> robotPose(Fixture& f, int robot, std::int64_t i) {
+  std::vector<double> out;
+  EXPECT_TRUE(f.engine.commonFramePose(
+      makeKey(static_cast<std::uint32_t>(robot), KeyKind::Pose, static_cast<std::uint64_t>(i)), out));
+  return out;
+}
+
+/// Largest common-frame difference over robot 0's poses 0..16 and robot 1's poses 0..8.
+double maxDiffTwoRobots(Fixture& a, Fixture& b) {
+  double d = 0;
+  for (int r = 0; r < 2; ++r)
+    for (int i = 0; i <= (r == 0 ? 16 : 8); ++i) {
+      const auto x = robotPose(a, r, i), y = robotPose(b, r, i);
+      if (x.size() != 3 || y.size() != 3) return 1e9;
+      d = std::max({d, std::hypot(x[0] - y[0], x[1] - y[1]), std::abs(std::remainder(x[2] - y[2], 2 * M_PI))});
+    }
+  return d;
+}
+
+/// Robot 1 (sender "b") seen from robot 0 (sender "a"), in the common frame.
+SE2 relative(Fixture& f, std::int64_t i0, std::int64_t i1) {
+  const auto a = robotPose(f, 0, i0), b = robotPose(f, 1, i1);
+  if (a.size() != 3 || b.size() != 3) return SE2(1e9, 1e9, 0);
+  return SE2(a[0], a[1], a[2]).between(SE2(b[0], b[1], b[2]));
+}
+
+int anchoredFactors(const Fixture& f) {
+  int n = 0;
+  for (const auto& x : f.engine.backend().graph().factors())
+    n += x && std::string(x->typeName()) == "AnchoredBetweenSE2";
+  return n;
+}
+
+/// Robot 0 ("a") drives the 4 m square (poses 0..16); robot 1 ("b") drives 8 m along x, 2 m to
+/// the left of robot 0's start (poses 0..8); both odometries slightly wrong. With `join`, "b"
+/// then sends a certain inter-robot closure: robot 1's pose 0 is 2 m left of robot 0's pose 0.
+void twoRobots(Fixture& x, bool join = true) {
+  for (int i = 0; i < 16; ++i)
+    x.send(batch("a", ++x.seq, {odo(x.id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+  for (int i = 0; i < 8; ++i) x.send(batch("b", i + 1, {odo(1000 + i, 1, i, i + 1, {0.97, -0.01, 0.01})}));
+  if (join) x.send(batch("b", 9, {inter(0, 0, 1, 0, {0, 2, 0}, 2000)}));
+}
+
+/// Robot 0's pose 2 sees robot 1 2 m to its left: robot 1's pose 2 (true, alternative 1), its
+/// pose 4 or pose 0, or robot 0's own pose 0 (decoys, one of them intra-robot), or none.
+A interGroup(std::int64_t id) {
+  return group(id, A::MULTI_ASSOCIATION,
+               {inter(0, 2, 1, 4, {0, 2, 0}), inter(0, 2, 1, 2, {0, 2, 0}), closure(0, 2, 0, {0, 2, 0}),
+                inter(0, 2, 1, 0, {0, 2, 0})},
+               true);
+}
+
+TEST(AmbiguousInterRobot, MhPicksTheTrueInterRobotAlternative) {
+  Fixture f("mh"), ref("isam2");
+  for (Fixture* x : {&f, &ref}) twoRobots(*x);
+  ASSERT_TRUE(f.engine.robotJoined(1));
+  const int anchoredBefore = anchoredFactors(f);
+  f.send(batch("lc", 1, {}, {interGroup(40)}));
+  ref.send(batch("lc", 1, {inter(0, 2, 1, 2, {0, 2, 0}, 40)}));
+  f.command(command_t::OPTIMIZE);
+  ref.command(command_t::OPTIMIZE);
+  ASSERT_TRUE(f.errors.empty()) << f.errors[0].reason;
+  ASSERT_TRUE(ref.errors.empty()) << ref.errors[0].reason;
+  const status_t s = f.fullStatus(), r = ref.fullStatus();
+  EXPECT_EQ(s.solver, "mh");
+  EXPECT_EQ(s.ambiguous, 1);
+  EXPECT_EQ(s.robots_in_common_frame, 2);
+  EXPECT_EQ(s.factors, r.factors - 1);  // the closure is a group here
+  EXPECT_EQ(s.live_hypotheses, 1);
+  EXPECT_EQ(s.undecided_ambiguous, 0);
+  const loop_decision_t* d = f.decision(s, 40);
+  ASSERT_NE(d, nullptr);
+  EXPECT_EQ(d->sender, "lc");
+  EXPECT_EQ(d->alternative, 1);
+  EXPECT_TRUE(d->accepted);
+  EXPECT_DOUBLE_EQ(d->weight, 1.0);
+  // The best hypothesis holds the chosen alternative as an anchored factor, like the reference.
+  EXPECT_EQ(anchoredFactors(f), anchoredBefore + 1);
+  EXPECT_EQ(anchoredFactors(ref), anchoredBefore + 1);
+  EXPECT_LT(maxDiffTwoRobots(f, ref), 1e-6);
+  EXPECT_NEAR(s.chi2, r.chi2, 1e-6 * (1 + s.chi2));
+  EXPECT_GT(s.chi2, 1e-3);  // the closure did pull
+  const SE2 z = relative(f, 2, 2);
+  EXPECT_NEAR(z.x, 0.0, 0.05);
+  EXPECT_NEAR(z.y, 2.0, 0.05);
+
+  // Removing the group (mh: a rebuild without it) gives the optimum without the closure.
+  Fixture bare("isam2");
+  twoRobots(bare);
+  bare.command(command_t::OPTIMIZE);
+  f.send(batch("lc", 2, {}, {}, {40}));
+  f.command(command_t::OPTIMIZE);
+  EXPECT_TRUE(f.errors.empty()) << f.errors[0].reason;
+  const status_t t = f.fullStatus();
+  EXPECT_EQ(t.ambiguous, 0);
+  EXPECT_EQ(f.decision(t, 40), nullptr);
+  EXPECT_EQ(anchoredFactors(f), anchoredBefore);
+  EXPECT_LT(maxDiffTwoRobots(f, bare), 1e-6);
+}
+
+TEST(AmbiguousInterRobot, OtherSolversFlattenIntoAnchoredFactors) {
+  Fixture plain("isam2"), robust("dcs");
+  for (Fixture* x : {&plain, &robust}) {
+    twoRobots(*x);
+    const int anchoredBefore = anchoredFactors(*x);
+    x->send(batch("lc", 1, {}, {interGroup(40)}));
+    x->command(command_t::OPTIMIZE);
+    ASSERT_TRUE(x->errors.empty()) << x->engine.backend().name() << ": " << x->errors[0].reason;
+    const status_t s = x->fullStatus();
+    EXPECT_EQ(s.ambiguous, 1);
+    EXPECT_EQ(s.live_hypotheses, 1);
+    EXPECT_EQ(s.num_hypotheses, 0);
+    ASSERT_NE(x->decision(s, 40), nullptr);
+    // The three inter-robot alternatives are ordinary anchored loop closures now.
+    EXPECT_EQ(anchoredFactors(*x), anchoredBefore + 3);
+  }
+  // Plain least squares takes them all: the decoys drag both robots.
+  EXPECT_GT(plain.fullStatus().chi2, 10.0);
+  // A robust kernel keeps the true alternative, evaluated in the common frame.
+  const status_t s = robust.fullStatus();
+  EXPECT_EQ(robust.decision(s, 40)->alternative, 1);
+  EXPECT_TRUE(robust.decision(s, 40)->accepted);
+  const SE2 z = relative(robust, 2, 2);
+  EXPECT_NEAR(z.x, 0.0, 0.1);
+  EXPECT_NEAR(z.y, 2.0, 0.1);
+  // Removing the group removes every alternative.
+  for (Fixture* x : {&plain, &robust}) {
+    const int anchoredWith = anchoredFactors(*x);
+    x->send(batch("lc", 2, {}, {}, {40}));
+    x->command(command_t::OPTIMIZE);
+    EXPECT_TRUE(x->errors.empty());
+    const status_t t = x->fullStatus();
+    EXPECT_EQ(t.ambiguous, 0);
+    EXPECT_EQ(anchoredFactors(*x), anchoredWith - 3);
+  }
+}
+
+TEST(AmbiguousInterRobot, AlternativeAsFirstLinkIsRefusedWhole) {
+  for (const std::string solver : {"mh", "isam2"}) {
+    Fixture f(solver);
+    twoRobots(f, /*join=*/false);
+    const status_t before = f.fullStatus();
+    EXPECT_EQ(before.robots, 2);
+    EXPECT_EQ(before.robots_in_common_frame, 0);
+    const size_t errorsBefore = f.errors.size();
+    // A valid closure of robot 0 and the group: nothing of the batch is applied.
+    f.send(batch("lc", 1, {closure(0, 16, 0, {0, 0, 0}, 50)}, {interGroup(40)}));
+    ASSERT_EQ(f.errors.size(), errorsBefore + 1) << solver;
+    const loopd::error_t& e = f.errors.back();
+    EXPECT_EQ(e.sender, "lc");
+    EXPECT_EQ(e.sequence, 1);
+    EXPECT_EQ(e.factor_id, 40);
+    EXPECT_EQ(e.code, loopd::error_t::INVALID_FIELD);
+    EXPECT_EQ(e.channel, "T_FACTORS");
+    EXPECT_NE(e.reason.find("joins robots 0 and 1"), std::string::npos) << e.reason;
+    EXPECT_NE(e.reason.find("send a certain inter-robot loop closure"), std::string::npos) << e.reason;
+    status_t after = f.fullStatus();
+    EXPECT_EQ(after.poses, before.poses) << solver;
+    EXPECT_EQ(after.factors, before.factors) << solver;
+    EXPECT_EQ(after.loop_closures, before.loop_closures) << solver;
+    EXPECT_EQ(after.ambiguous, 0) << solver;
+    EXPECT_EQ(after.robots_in_common_frame, 0) << solver;
+    EXPECT_EQ(after.batches_rejected, before.batches_rejected + 1) << solver;
+    EXPECT_DOUBLE_EQ(after.chi2, before.chi2) << solver;
+    EXPECT_FALSE(f.engine.robotJoined(0));
+    EXPECT_FALSE(f.engine.robotJoined(1));
+
+    // The server goes on: the certain link and the group in one batch are accepted (the
+    // batch's own certain factor joins the robots first), and the ids were not consumed.
+    f.send(batch("lc", 2, {inter(0, 0, 1, 0, {0, 2, 0}, 2000), closure(0, 16, 0, {0, 0, 0}, 50)},
+                 {interGroup(40)}));
+    f.command(command_t::OPTIMIZE);
+    ASSERT_EQ(f.errors.size(), errorsBefore + 1) << solver << ": " << f.errors.back().reason;
+    after = f.fullStatus();
+    EXPECT_EQ(after.ambiguous, 1) << solver;
+    EXPECT_EQ(after.robots_in_common_frame, 2) << solver;
+    EXPECT_EQ(after.batches_accepted, before.batches_accepted + 1) << solver;
+    ASSERT_NE(f.decision(after, 40), nullptr);
+    if (solver == "mh") {
+      EXPECT_EQ(f.decision(after, 40)->alternative, 1);
+    }
+
+    // Removing the only certain link in the batch that brings a group: refused again.
+    f.send(batch("lc", 3, {}, {group(41, A::MULTI_MEASUREMENT,
+                                     {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})},
+                 {2000}));
+    ASSERT_EQ(f.errors.size(), errorsBefore + 2) << solver;
+    EXPECT_EQ(f.errors.back().factor_id, 41);
+    EXPECT_EQ(f.fullStatus().ambiguous, 1) << solver;
+    EXPECT_EQ(f.fullStatus().batches_rejected, before.batches_rejected + 2) << solver;
+    // A robot no certain factor ever joined.
+    f.send(batch("lc", 4, {}, {group(42, A::MULTI_ASSOCIATION,
+                                     {inter(0, 6, 1, 4, {0, 0, 0}), inter(0, 6, 2, 4, {0, 0, 0})}, true)}));
+    ASSERT_EQ(f.errors.size(), errorsBefore + 3) << solver;
+    EXPECT_NE(f.errors.back().reason.find("alternative 1 joins robots 0 and 2"), std::string::npos)
+        << f.errors.back().reason;
+  }
+}
+
+TEST(AmbiguousInterRobot, JournalResumeSwitchSolverAndRemoval) {
+  const std::string path = ::testing::TempDir() + "/" + std::to_string(getpid()) + "_amb_inter_journal.lcmlog";
+  std::remove(path.c_str());
+  status_t first;
+  std::vector<std::vector<double>> poses;
+  {
+    Journal j(path, false);
+    Fixture f("mh", &j);
+    twoRobots(f);
+    f.send(batch("lc", 1, {}, {interGroup(40)}));
+    // Robot 1's pose 4 seen from robot 0's pose 6: 0 m (true) or 1.5 m ahead.
+    f.send(batch("lc", 2, {}, {group(41, A::MULTI_MEASUREMENT,
+                                     {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})}));
+    f.send(batch("lc", 3, {}, {group(42, A::MULTI_ASSOCIATION,
+                                     {inter(0, 4, 1, 6, {0, 0, 0}), inter(0, 4, 1, 8, {0, 0, 0})}, true)}));
+    f.send(batch("lc", 4, {}, {}, {42}));
+    // Refused (robot 2 is in no common frame): not journaled.
+    f.send(batch("lc", 5, {}, {group(43, A::MULTI_ASSOCIATION,
+                                     {inter(0, 6, 1, 4, {0, 0, 0}), inter(0, 6, 2, 4, {0, 0, 0})}, true)}));
+    ASSERT_EQ(f.errors.size(), 1u);
+    EXPECT_EQ(f.errors[0].factor_id, 43);
+    f.command(command_t::OPTIMIZE);
+    first = f.fullStatus();
+    EXPECT_EQ(first.ambiguous, 2);
+    ASSERT_NE(f.decision(first, 40), nullptr);
+    ASSERT_NE(f.decision(first, 41), nullptr);
+    EXPECT_EQ(f.decision(first, 40)->alternative, 1);
+    EXPECT_EQ(f.decision(first, 41)->alternative, 0);
+    for (int r = 0; r < 2; ++r)
+      for (int i = 0; i <= (r == 0 ? 16 : 8); ++i) poses.push_back(robotPose(f, r, i));
+    EXPECT_EQ(j.written(), 16 + 9 + 4);
+  }
+  // Resume: one round replays the certain link and the groups that need it.
+  Fixture g("mh");
+  g.engine.replay(path, false, nullptr);
+  status_t s = g.fullStatus();
+  EXPECT_TRUE(g.errors.empty()) << g.errors[0].reason;
+  EXPECT_EQ(s.ambiguous, 2);
+  EXPECT_EQ(s.factors, first.factors);
+  EXPECT_EQ(s.robots_in_common_frame, 2);
+  for (std::int64_t gid : {40, 41}) {
+    ASSERT_NE(g.decision(s, gid), nullptr);
+    EXPECT_EQ(g.decision(s, gid)->alternative, g.decision(first, gid)->alternative);
+  }
+  EXPECT_NEAR(s.chi2, first.chi2, 1e-6 * (1 + first.chi2));
+  size_t n = 0;
+  for (int r = 0; r < 2; ++r)
+    for (int i = 0; i <= (r == 0 ? 16 : 8); ++i, ++n) {
+      const auto x = robotPose(g, r, i);
+      ASSERT_EQ(x.size(), 3u);
+      EXPECT_NEAR(x[0], poses[n][0], 1e-6);
+      EXPECT_NEAR(x[1], poses[n][1], 1e-6);
+    }
+  // Another solver on the same journal flattens the same groups.
+  Fixture h("dcs");
+  h.engine.replay(path, false, nullptr);
+  EXPECT_TRUE(h.errors.empty()) << h.errors[0].reason;
+  EXPECT_EQ(h.fullStatus().ambiguous, 2);
+
+  // SWITCH_SOLVER both ways keeps the groups and their anchored alternatives.
+  g.command(command_t::SWITCH_SOLVER, "isam2");
+  s = g.fullStatus();
+  EXPECT_EQ(s.solver, "isam2");
+  EXPECT_EQ(s.ambiguous, 2);
+  g.command(command_t::SWITCH_SOLVER, "mh");
+  g.command(command_t::OPTIMIZE);
+  s = g.fullStatus();
+  EXPECT_EQ(s.ambiguous, 2);
+  EXPECT_EQ(g.decision(s, 40)->alternative, 1);
+  EXPECT_EQ(g.decision(s, 41)->alternative, 0);
+  // Removing a group after the resume, then one more under the (unchanged) link.
+  g.send(batch("lc", 6, {}, {}, {41}));
+  g.send(batch("lc", 7, {}, {group(44, A::MULTI_MEASUREMENT,
+                                   {inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2}), inter(0, 6, 1, 4, {0, 0, -M_PI / 2})})}));
+  g.command(command_t::OPTIMIZE);
+  EXPECT_TRUE(g.errors.empty()) << g.errors[0].reason;
+  s = g.fullStatus();
+  EXPECT_EQ(s.ambiguous, 2);
+  EXPECT_EQ(g.decision(s, 41), nullptr);
+  ASSERT_NE(g.decision(s, 44), nullptr);
+  EXPECT_EQ(g.decision(s, 44)->alternative, 1);
+  std::remove(path.c_str());
+}
+TEST(AmbiguousInterRobot, RemovingTheCertainLinkKeepsTheGroupSolvable) {
+  for (const std::string solver : {"mh", "isam2"}) {
+    Fixture f(solver);
+    twoRobots(f);
+    f.send(batch("lc", 1, {}, {interGroup(40)}));
+    // The only certain link goes: each robot roots its own group again; the group stays,
+    // evaluated through the anchors, and does not count as a link.
+    f.send(batch("b", 10, {}, {}, {2000}));
+    f.command(command_t::OPTIMIZE);
+    ASSERT_TRUE(f.errors.empty()) << solver << ": " << f.errors[0].reason;
+    status_t s = f.fullStatus();
+    EXPECT_EQ(s.ambiguous, 1) << solver;
+    EXPECT_TRUE(std::isfinite(s.chi2) && s.chi2 >= 0.0) << solver;
+    ASSERT_NE(f.decision(s, 40), nullptr);
+    f.send(batch("lc", 2, {}, {group(41, A::MULTI_MEASUREMENT,
+                                     {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})}));
+    ASSERT_EQ(f.errors.size(), 1u) << solver;
+    EXPECT_EQ(f.errors.back().factor_id, 41);
+    // A new certain link joins them again: the group is accepted.
+    f.send(batch("b", 11, {inter(0, 0, 1, 0, {0, 2, 0}, 2001)}));
+    f.send(batch("lc", 3, {}, {group(41, A::MULTI_MEASUREMENT,
+                                     {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})}));
+    f.command(command_t::OPTIMIZE);
+    EXPECT_EQ(f.errors.size(), 1u) << solver << ": " << f.errors.back().reason;
+    s = f.fullStatus();
+    EXPECT_EQ(s.ambiguous, 2) << solver;
+    EXPECT_TRUE(std::isfinite(s.chi2)) << solver;
+    if (solver == "mh") {
+      ASSERT_NE(f.decision(s, 41), nullptr);
+      EXPECT_EQ(f.decision(s, 41)->alternative, 0);
+      EXPECT_EQ(f.decision(s, 40)->alternative, 1);
+    }
+  }
+}
+
+
+factor_t between3(int ra, std::int64_t a, int rb, std::int64_t b, Eigen::Vector3d t, std::int8_t role,
+                  std::int64_t id = 0) {
+  client::Pose3 z;
+  z.t = t;
+  factor_t f = client::loopClosureFactor(KeyRef::pose(ra, a), KeyRef::pose(rb, b), z,
+                                         Eigen::Matrix<double, 6, 6>::Identity() * 100);
+  f.id = id;
+  f.role = role;
+  return f;
+}
+
+TEST(AmbiguousInterRobot, Se3AlternativesGoThroughTheAnchorsToo) {
+  const std::int8_t lc = factor_t::ROLE_LOOP_CLOSURE, od = factor_t::ROLE_ODOMETRY;
+  Fixture f("mh"), ref("isam2");
+  for (Fixture* x : {&f, &ref}) {
+    for (int i = 0; i < 6; ++i) x->send(batch("a", i + 1, {between3(0, i, 0, i + 1, {1.0, 0.01, 0}, od, i)}));
+    for (int i = 0; i < 6; ++i) x->send(batch("b", i + 1, {between3(1, i, 1, i + 1, {1.03, 0, 0.01}, od, 100 + i)}));
+    x->send(batch("b", 7, {between3(0, 0, 1, 0, {0, 2, 0}, lc, 200)}));
+  }
+  // Robot 1's pose 4 seen from robot 0's pose 4: 2 m to the left (true) or also 1.5 m ahead.
+  f.send(batch("lc", 1, {}, {group(40, A::MULTI_MEASUREMENT,
+                                   {between3(0, 4, 1, 4, {1.5, 2, 0}, lc), between3(0, 4, 1, 4, {0, 2, 0}, lc)})}));
+  ref.send(batch("lc", 1, {between3(0, 4, 1, 4, {0, 2, 0}, lc, 40)}));
+  f.command(command_t::OPTIMIZE);
+  ref.command(command_t::OPTIMIZE);
+  ASSERT_TRUE(f.errors.empty()) << f.errors[0].reason;
+  const status_t s = f.fullStatus();
+  ASSERT_NE(f.decision(s, 40), nullptr);
+  EXPECT_EQ(f.decision(s, 40)->alternative, 1);
+  double d = 0;
+  for (int r = 0; r < 2; ++r)
+    for (int i = 0; i <= 6; ++i) {
+      const auto x = robotPose(f, r, i), y = robotPose(ref, r, i);
+      ASSERT_EQ(x.size(), 7u);
+      ASSERT_EQ(y.size(), 7u);
+      double dq = 0, dqFlipped = 0;  // quaternions up to sign
+      for (size_t k = 0; k < 3; ++k) d = std::max(d, std::abs(x[k] - y[k]));
+      for (size_t k = 3; k < 7; ++k) {
+        dq = std::max(dq, std::abs(x[k] - y[k]));
+        dqFlipped = std::max(dqFlipped, std::abs(x[k] + y[k]));
+      }
+      d = std::max(d, std::min(dq, dqFlipped));
+    }
+  EXPECT_LT(d, 1e-6);
+  const auto a = robotPose(f, 0, 4), b = robotPose(f, 1, 4);
+  EXPECT_NEAR(b[0] - a[0], 0.0, 0.15);  // odometry drift shared out; the decoy is 1.5 m off
+  EXPECT_NEAR(b[1] - a[1], 2.0, 0.15);
+  EXPECT_NEAR(s.chi2, ref.fullStatus().chi2, 1e-6 * (1 + s.chi2));
+}
+
 
 // --- the same as loopd-solve --solver mh --incremental -------------------------------------
 
@@ -753,6 +1135,113 @@ TEST(AmbiguousLive, ClientGroupThroughLoopdMh) {
   EXPECT_EQ(sub.errorsReceived(), 0);
   srv.kill(SIGINT);
   EXPECT_EQ(srv.wait(20), 0) << srv.output();
+}
+
+// --- over LCM: an inter-robot group refused as a first link, accepted after a certain link,
+// kept across kill -9 and --resume --------------------------------------------------------
+
+TEST(AmbiguousLive, InterRobotGroupRefusedThenAcceptedSurvivesKillNine) {
+  using namespace loopd::testing_live;
+  const std::string url = uniqueUrl();
+  const std::string journal = tmp("amb_inter_journal.lcmlog");
+  std::remove(journal.c_str());
+  lcm::LCM lcm(client::receiveUrl(url));
+  ASSERT_TRUE(lcm.good());
+  client::EstimateSubscriber sub(lcm);
+  std::vector<status_t> replies;
+  sub.onStatus([&](const status_t& s) {
+    if (s.request_id == 42) replies.push_back(s);
+  });
+  auto pump = [&](int ms) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
+    while (std::chrono::steady_clock::now() < end) lcm.handleTimeout(20);
+  };
+  auto send = [&](const factor_batch_t& b) {
+    lcm.publish("LOOPD_FACTORS", &b);
+    pump(20);
+  };
+  auto requestStatus = [&]() -> status_t {
+    replies.clear();
+    command_t c{};
+    c.sender = "test";
+    c.request_id = 42;
+    c.command = command_t::REQUEST_STATUS;
+    c.argument = "";
+    for (int attempt = 0; attempt < 3 && replies.empty(); ++attempt) {
+      lcm.publish("LOOPD_COMMAND", &c);
+      pump(600);
+    }
+    if (replies.empty()) {
+      ADD_FAILURE() << "no reply to REQUEST_STATUS";
+      return status_t{};
+    }
+    status_t out = replies.front();
+    for (size_t i = 1; i < replies.size(); ++i)
+      if (replies[i].decisions_full && replies[i].decisions_chunk_index > 0)
+        out.decisions.insert(out.decisions.end(), replies[i].decisions.begin(), replies[i].decisions.end());
+    return out;
+  };
+  auto groupDecision = [](const status_t& s, std::int64_t gid) -> const loop_decision_t* {
+    for (const auto& d : s.decisions)
+      if (d.ambiguous && d.factor_id == gid) return &d;
+    return nullptr;
+  };
+  {
+    Proc srv = Proc::start({kLoopd, "--lcm-url", url, "--solver", "mh", "--journal", journal,
+                            "--idle-seconds", "0.2"},
+                           tmp("amb_inter_srv1.log"));
+    std::this_thread::sleep_for(std::chrono::milliseconds(400));
+    ASSERT_TRUE(srv.alive()) << srv.output();
+    pump(200);
+    for (int i = 0; i < 16; ++i)
+      send(batch("a", i + 1, {odo(i, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+    for (int i = 0; i < 8; ++i) send(batch("b", i + 1, {odo(1000 + i, 1, i, i + 1, {0.97, -0.01, 0.01})}));
+    // The group as the first link between the robots: refused, nothing applied.
+    send(batch("lc", 1, {closure(0, 16, 0, {0, 0, 0}, 50)}, {interGroup(40)}));
+    pump(400);
+    ASSERT_EQ(sub.errorsReceived(), 1);
+    const loopd::error_t e = sub.errors().back();
+    EXPECT_EQ(e.sender, "lc");
+    EXPECT_EQ(e.sequence, 1);
+    EXPECT_EQ(e.factor_id, 40);
+    EXPECT_EQ(e.code, loopd::error_t::INVALID_FIELD);
+    EXPECT_EQ(e.channel, "LOOPD_FACTORS");
+    EXPECT_NE(e.reason.find("send a certain inter-robot loop closure"), std::string::npos) << e.reason;
+    ASSERT_TRUE(srv.alive());
+    status_t s = requestStatus();
+    EXPECT_EQ(s.ambiguous, 0);
+    EXPECT_EQ(s.batches_rejected, 1);
+    EXPECT_EQ(s.robots_in_common_frame, 0);
+    // A certain link, then the same group: accepted.
+    send(batch("b", 9, {inter(0, 0, 1, 0, {0, 2, 0}, 2000)}));
+    send(batch("lc", 2, {}, {interGroup(40)}));
+    pump(600);
+    s = requestStatus();
+    EXPECT_EQ(s.ambiguous, 1);
+    EXPECT_EQ(s.robots_in_common_frame, 2);
+    EXPECT_EQ(s.batches_accepted, 16 + 9 + 1);
+    ASSERT_NE(groupDecision(s, 40), nullptr);
+    EXPECT_EQ(groupDecision(s, 40)->alternative, 1);
+    EXPECT_EQ(sub.errorsReceived(), 1);
+    srv.kill(SIGKILL);
+    EXPECT_NE(srv.output().find("send a certain inter-robot loop closure"), std::string::npos) << srv.output();
+  }
+  Proc srv = Proc::start({kLoopd, "--lcm-url", url, "--solver", "mh", "--journal", journal,
+                          "--resume", journal, "--idle-seconds", "0.2"},
+                         tmp("amb_inter_srv2.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(600));
+  ASSERT_TRUE(srv.alive()) << srv.output();
+  pump(300);
+  const status_t s = requestStatus();
+  EXPECT_EQ(s.ambiguous, 1);
+  EXPECT_EQ(s.robots_in_common_frame, 2);
+  EXPECT_EQ(s.batches_accepted, 16 + 9 + 1);
+  ASSERT_NE(groupDecision(s, 40), nullptr);
+  EXPECT_EQ(groupDecision(s, 40)->alternative, 1);
+  EXPECT_EQ(sub.errorsReceived(), 1);
+  srv.kill(SIGINT);
+  EXPECT_EQ(srv.wait(20), 0) << srv.output();
+  std::remove(journal.c_str());
 }
 
 }  // namespace
