@@ -162,8 +162,6 @@ void checkAmbiguous(std::int8_t mode, const std::vector<loopd::factor_t>& alts, 
       fail("alternatives must be loop closures or landmark sightings");
     if (f.type != alts[0].type || f.role != alts[0].role)
       fail("all alternatives must have one type and role");
-    if (f.keys.size() == 2 && f.keys[0].robot != f.keys[1].robot)
-      fail("inter-robot alternatives are not supported");
     if (i == 0) continue;
     if (mode == A::MULTI_MEASUREMENT && !sameKeys(f, alts[0]))
       fail("MULTI_MEASUREMENT alternatives must have the same keys");

@@ -142,6 +142,10 @@ void FactorBatchValidator::checkFactor(const F& f, std::int64_t reportId,
     bad(E::LIMIT_EXCEEDED, "robust name longer than 15 characters");
   else if (std::find(robustNames().begin(), robustNames().end(), f.robust) == robustNames().end())
     bad(E::INVALID_FIELD, "unknown robust handling '" + f.robust + "'");
+  else if ((f.role == F::ROLE_PRIOR || f.role == F::ROLE_ODOMETRY) && !f.robust.empty() &&
+           f.robust != "none")
+    bad(E::INVALID_FIELD, "robust '" + f.robust +
+                              "' on a prior or odometry factor: those are trusted (use \"\" or \"none\")");
   if (!std::isfinite(f.robust_param) || f.robust_param < 0.0)
     bad(E::INVALID_FIELD, "robust_param " + num(f.robust_param) + " must be finite and >= 0");
 }
@@ -300,6 +304,18 @@ std::vector<Issue> FactorBatchValidator::check(const B& b) const {
 
 std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphView& g) const {
   std::vector<Issue> out;
+  // Graduated schemes act on all uncertain factors together: one factor cannot opt into them.
+  auto scheme = [&](const F& f, std::int64_t reportId) {
+    if ((f.robust == "gnc-gm" || f.robust == "gnc-tls" || f.robust == "risam") &&
+        f.robust != g.solver())
+      out.push_back({reportId, E::INVALID_FIELD,
+                     "robust '" + f.robust + "' is a whole-graph scheme: it applies only as the "
+                     "server's --solver (now '" + g.solver() + "'); per factor use none, huber, "
+                     "cauchy, gm, dcs, sc or mm"});
+  };
+  for (const auto& f : b.factors) scheme(f, f.id);
+  for (const auto& a : b.ambiguous)
+    for (const auto& f : a.alternatives) scheme(f, a.id);
   for (const auto& f : b.factors)
     if (g.idUsed(b.sender, f.id))
       out.push_back({f.id, E::DUPLICATE_FACTOR_ID,

@@ -38,6 +38,8 @@ class GraphView {
   /// factors (those in the graph or staged, minus the batch's removals, plus the batch's own).
   /// A robot not listed is alone in its own frame. Only asked for when the batch has an
   /// inter-robot ambiguous alternative.
+  /// The server's solver now (per-factor `robust` naming a whole-graph scheme must match it).
+  virtual std::string solver() const { return ""; }
   virtual std::map<std::uint32_t, std::uint32_t> frameGroups(
       const loopd::factor_batch_t& /*batch*/) const {
     return {};
@@ -53,8 +55,10 @@ class FactorBatchValidator {
   /// Checks of one ambiguous group: mode, number of alternatives, null weight, every
   /// alternative as a factor, and the mode's rules (same keys / same measurement and noise).
   void checkAmbiguous(const loopd::ambiguous_factor_t& a, std::vector<Issue>& out) const;
-  /// Checks against the graph: ids, removals, variable types, and inter-robot ambiguous
-  /// alternatives only between robots already in one common frame. Run after check() passed.
+  /// Checks against the graph: ids, removals, variable types, inter-robot ambiguous
+  /// alternatives only between robots already in one common frame, and per-factor `robust`
+  /// naming a whole-graph scheme (gnc-gm, gnc-tls, risam) only if it is the server's solver.
+  /// Run after check() passed.
   std::vector<Issue> checkContext(const loopd::factor_batch_t& batch, const GraphView& graph) const;
 };
 

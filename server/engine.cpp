@@ -133,7 +133,7 @@ SE3 se3Of(const Values& v, Key k) { return v.se3(v.slot(k)); }
 
 Engine::Engine(EngineOptions options, Publisher& publisher, Journal* journal)
     : opt_(std::move(options)), pub_(publisher), journal_(journal) {
-  backend_ = makeBackend(opt_.solver, backendOptions());
+  backend_ = makeSolver(opt_.solver);
   lastInput_ = lastStatus_ = Clock::now();
 }
 
@@ -537,6 +537,8 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     }
     const FactorId id = newFactorId();
     std::const_pointer_cast<Factor>(f)->setId(id);
+    if (isUncertain(f->role()))
+      std::const_pointer_cast<Factor>(f)->setRobustRequest({wf.robust, wf.robust_param});
     u.factors.push_back(f);
     st.owners.push_back({b.sender, wf.id, isUncertain(f->role())});
     sessions_.addId(b.sender, wf.id, id);
@@ -557,6 +559,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
       std::shared_ptr<Factor> f = buildFactor(wf);
       if (isInterRobot(wf)) f = anchoredFactor(wf, *f);
       f->setId(newFactorId());
+      f->setRobustRequest({wf.robust, wf.robust_param});  // applies once flattened
       g.factor.alternatives.push_back(std::move(f));
     }
     u.ambiguous.push_back(g.factor);
@@ -847,7 +850,7 @@ std::vector<Key> Engine::applyUpdate(BackendUpdate u, const std::vector<FactorId
     // (cost: a rebuild of everything).
     const std::unordered_set<FactorId> gone(groupRemovals.begin(), groupRemovals.end());
     const std::unordered_set<FactorId> removed(u.removals.begin(), u.removals.end());
-    std::unique_ptr<Backend> next = makeBackend(backend_->name(), backendOptions());
+    std::unique_ptr<PerFactorRobustBackend> next = makeSolver(backend_->name());
     BackendUpdate full;
     for (const auto& [id, f] : live_)
       if (!removed.count(id)) full.factors.push_back(f);
@@ -1087,7 +1090,7 @@ std::vector<loopd::loop_decision_t> Engine::decisionList(bool full) {
     for (const auto& [gid, g] : groups_) ms.push_back(g.factor);
     const std::vector<int> chosen = chosenAlternatives(*backend_, ms);
     std::vector<double> share(ms.size(), 1.0);
-    if (const auto* mh = dynamic_cast<const MhBackend*>(backend_.get())) {
+    if (const auto* mh = dynamic_cast<const MhBackend*>(&backend_->solver())) {
       const auto hyps = mh->hypotheses(mh->liveHypotheses());
       for (size_t l = 0; l < ms.size(); ++l) {
         int agree = 0, n = 0;
@@ -1183,7 +1186,7 @@ void Engine::publishStatus(std::int64_t requestId, bool fullDecisions, int hypot
   s.decisions_full = fullDecisions;
   s.live_hypotheses = 1;
   s.undecided_ambiguous = 0;
-  if (const auto* mh = dynamic_cast<const MhBackend*>(backend_.get())) {
+  if (const auto* mh = dynamic_cast<const MhBackend*>(&backend_->solver())) {
     s.live_hypotheses = mh->liveHypotheses();
     const auto hyps = mh->hypotheses(mh->liveHypotheses());
     // Layers are the groups in arrival order (= ascending internal id, as fed to the backend).
@@ -1246,8 +1249,12 @@ void Engine::feedRebuilt(Backend& next, BackendUpdate all) {
   if (!groups.ambiguous.empty()) next.update(groups);
 }
 
+std::unique_ptr<PerFactorRobustBackend> Engine::makeSolver(const std::string& name) const {
+  return std::make_unique<PerFactorRobustBackend>(makeBackend(name, backendOptions()));
+}
+
 void Engine::rebuildBackend(const std::string& solver) {
-  std::unique_ptr<Backend> next = makeBackend(solver, backendOptions());
+  std::unique_ptr<PerFactorRobustBackend> next = makeSolver(solver);
   BackendUpdate all;
   for (const auto& [id, f] : live_) all.factors.push_back(f);
   for (const auto& [id, g] : groups_) all.ambiguous.push_back(g.factor);  // in arrival order
@@ -1260,7 +1267,7 @@ void Engine::rebuildBackend(const std::string& solver) {
 }
 
 void Engine::resetAll() {
-  backend_ = makeBackend(backend_->name(), backendOptions());
+  backend_ = makeSolver(backend_->name());
   sessions_.clear();
   robots_.clear();
   live_.clear();
@@ -1446,7 +1453,7 @@ void Engine::handleCommand(const Inbound& m) {
             return;
           }
         }
-        if (const auto* mh = dynamic_cast<const MhBackend*>(backend_.get())) {
+        if (const auto* mh = dynamic_cast<const MhBackend*>(&backend_->solver())) {
           const auto hyps = mh->hypotheses(n);
           for (size_t r = 0; r < hyps.size(); ++r)
             publishEstimates(nullptr, c.request_id, -1, hyps[r].estimate, static_cast<int>(r));

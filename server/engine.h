@@ -39,6 +39,7 @@
 #include "server/journal.h"
 #include "server/publisher.h"
 #include "server/session_table.h"
+#include "robust/per_factor_backend.h"
 #include "solvers/backend/backend.h"
 
 namespace loopd::server {
@@ -144,6 +145,8 @@ class Engine : private GraphView {
   bool idUsed(const std::string& sender, std::int64_t id) const override;
   bool idLive(const std::string& sender, std::int64_t id) const override;
   std::map<std::uint32_t, std::uint32_t> frameGroups(const loopd::factor_batch_t& b) const override;
+  std::string solver() const override { return backend_->name(); }
+  std::unique_ptr<PerFactorRobustBackend> makeSolver(const std::string& name) const;
 
   void handleFactors(std::shared_ptr<const Inbound> m, bool replayed);
   void handleCommand(const Inbound& m);
@@ -192,7 +195,8 @@ class Engine : private GraphView {
   Publisher& pub_;
   Journal* journal_;
   FactorBatchValidator validator_;
-  std::unique_ptr<Backend> backend_;
+  // The --solver variant inside the layer that applies each factor's own `robust` request.
+  std::unique_ptr<PerFactorRobustBackend> backend_;
 
   mutable std::mutex qmu_;
   std::condition_variable qcv_;

@@ -123,12 +123,14 @@ TEST(FactorPublisher, AmbiguousGroupsAndTheServersRules) {
   factor_t odo = lc(0, 0);
   odo.role = factor_t::ROLE_ODOMETRY;
   EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {odo, odo}, false), std::invalid_argument);
-  factor_t inter = lc(0, 0);
-  inter.keys[1].robot = 3;
-  EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {inter, inter}, true), std::invalid_argument);
   EXPECT_EQ(pub.pendingItems(), 0);
   EXPECT_NO_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {lc(0, 0), lc(0, 1)}, false));
   EXPECT_EQ(pub.pendingItems(), 2);
+  // Inter-robot alternatives: whether the robots are joined yet is the server's to judge.
+  factor_t inter = lc(0, 0), inter2 = lc(0, 1);
+  inter.keys[1].robot = inter2.keys[1].robot = 3;
+  EXPECT_NO_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {inter, inter2}, true));
+  EXPECT_EQ(pub.pendingItems(), 4);
 }
 
 estimate_t chunk(int64_t seq, int robot, bool full, int index, int count, std::vector<int64_t> ids) {

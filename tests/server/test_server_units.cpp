@@ -2,6 +2,7 @@
 // factors' Jacobians, and the engine driven directly (messages in, captured messages out).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <thread>
@@ -134,6 +135,7 @@ TEST(FactorBatchValidator, ReportsEachProblemWithItsCode) {
       {[&](factor_t& f) { f.type = 42; }, loopd::error_t::INVALID_FIELD},
       {[&](factor_t& f) { f.role = factor_t::ROLE_PRIOR; }, loopd::error_t::INVALID_FIELD},
       {[&](factor_t& f) { f.robust = "bogus"; }, loopd::error_t::INVALID_FIELD},
+      {[&](factor_t& f) { f.robust = "dcs"; }, loopd::error_t::INVALID_FIELD},  // odometry is trusted
       {[&](factor_t& f) { f.robust_param = -1; }, loopd::error_t::INVALID_FIELD},
       {[&](factor_t& f) { f.noise_kind = 0; }, loopd::error_t::INVALID_FIELD},
       {[&](factor_t& f) { f.id = -3; }, loopd::error_t::INVALID_FIELD},
@@ -442,6 +444,64 @@ TEST(Engine, RemovalsAndCommands) {
   // After RESET sequences restart.
   f.send(batch("r0", 1, {between2(0, 0, 0, 0, 1, {1, 0, 0})}));
   EXPECT_EQ(f.poses(), 2);
+}
+
+// A 20-pose walk whose every pose also sees the one two steps back (true closures), then one
+// wrong closure from the last pose to the first with the given per-factor `robust`.
+void rigidWalkWithWrongClosure(EngineFixture& f, const std::string& robust) {
+  std::int64_t seq = 0, id = 0;
+  const Pose2 two{1 + std::cos(0.1), std::sin(0.1), 0.2};  // {1, 0, 0.1} twice
+  for (int i = 0; i < 20; ++i) {
+    std::vector<factor_t> fs = {between2(id++, 0, i, 0, i + 1, {1, 0, 0.1})};
+    if (i >= 1) fs.push_back(between2(id++, 0, i - 1, 0, i + 1, two, factor_t::ROLE_LOOP_CLOSURE));
+    f.send(batch("r0", ++seq, fs));
+  }
+  factor_t wrong = between2(1000, 0, 20, 0, 0, {3, -2, 1.0}, factor_t::ROLE_LOOP_CLOSURE);
+  wrong.robust = robust;
+  f.send(batch("r0", ++seq, {wrong}));
+}
+
+TEST(Engine, PerFactorRobustRequestsApplyUnderAnySolver) {
+  // isam2 alone takes the wrong closure; asked for "dcs" on it, the server rejects it.
+  EngineFixture plain("isam2");
+  rigidWalkWithWrongClosure(plain, "");
+  EXPECT_TRUE(plain.engine.backend().rejected().empty());
+  EngineFixture asked("isam2");
+  rigidWalkWithWrongClosure(asked, "dcs");
+  EXPECT_TRUE(asked.out.errors.empty()) << asked.out.errors[0].reason;
+  EXPECT_EQ(asked.engine.backend().rejected().size(), 1u);
+  EXPECT_LT(asked.engine.backend().chi2(), plain.engine.backend().chi2());
+  // It survives a solver switch (the request travels with the factor).
+  asked.command(command_t::SWITCH_SOLVER, "gn");
+  EXPECT_EQ(asked.engine.backend().name(), "gn");
+  EXPECT_EQ(asked.engine.backend().rejected().size(), 1u);
+  // dcs as the solver rejects it too; "none" forces it in.
+  EngineFixture robust("dcs");
+  rigidWalkWithWrongClosure(robust, "");
+  EXPECT_EQ(robust.engine.backend().rejected().size(), 1u);
+  EngineFixture forced("dcs");
+  rigidWalkWithWrongClosure(forced, "none");
+  const Backend& b = forced.engine.backend();
+  FactorId wrong = 0;
+  for (const auto& x : b.graph().factors())
+    if (x->size() == 2 && x->key(0) == poseKey(20) && x->key(1) == poseKey(0)) wrong = x->id();
+  ASSERT_NE(wrong, 0u);
+  const auto rejected = b.rejected();
+  EXPECT_EQ(std::count(rejected.begin(), rejected.end(), wrong), 0);  // the true ones give way
+  EXPECT_GT(b.chi2(), robust.engine.backend().chi2());
+}
+
+TEST(Engine, WholeGraphSchemesPerFactorOnlyAsTheSolver) {
+  EngineFixture f("isam2");
+  rigidWalkWithWrongClosure(f, "risam");
+  ASSERT_EQ(f.out.errors.size(), 1u);
+  EXPECT_EQ(f.out.errors[0].code, loopd::error_t::INVALID_FIELD);
+  EXPECT_NE(std::string(f.out.errors[0].reason).find("whole-graph scheme"), std::string::npos);
+  EXPECT_EQ(f.engine.backend().graph().size(), 40u);  // the walk and its prior: nothing of the batch
+  EngineFixture r("risam");
+  rigidWalkWithWrongClosure(r, "risam");
+  EXPECT_TRUE(r.out.errors.empty());
+  EXPECT_EQ(r.engine.backend().rejected().size(), 1u);
 }
 
 TEST(Engine, TwoRobotsJoinInOneFrame) {
