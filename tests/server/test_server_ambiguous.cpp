@@ -160,6 +160,22 @@ double maxDiff(Fixture& a, Fixture& b, int poses) {
   return d;
 }
 
+// SWITCH_SOLVER to isam2 and back to mh keeps every group and, per group id, its choice.
+void expectSwitchRoundTripKeeps(Fixture& f, const std::vector<std::pair<std::int64_t, int>>& choices) {
+  f.command(command_t::SWITCH_SOLVER, "isam2");
+  status_t s = f.fullStatus();
+  EXPECT_EQ(s.solver, "isam2");
+  EXPECT_EQ(s.ambiguous, static_cast<int>(choices.size()));
+  f.command(command_t::SWITCH_SOLVER, "mh");
+  f.command(command_t::OPTIMIZE);
+  s = f.fullStatus();
+  EXPECT_EQ(s.ambiguous, static_cast<int>(choices.size()));
+  for (const auto& [id, alternative] : choices) {
+    ASSERT_NE(f.decision(s, id), nullptr) << id;
+    EXPECT_EQ(f.decision(s, id)->alternative, alternative) << id;
+  }
+}
+
 // --- validation ---------------------------------------------------------------------------
 
 TEST(AmbiguousValidation, WellFormedGroupsPass) {
@@ -472,16 +488,7 @@ TEST(AmbiguousEngine, SwitchSolverKeepsTheGroups) {
   EXPECT_LT(s.chi2, flatChi2);  // the decoy no longer pulls
   // A group added under mh survives the way back.
   f.send(batch("lc", 2, {}, {group(2, A::MULTI_MEASUREMENT, {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
-  f.command(command_t::SWITCH_SOLVER, "isam2");
-  s = f.fullStatus();
-  EXPECT_EQ(s.solver, "isam2");
-  EXPECT_EQ(s.ambiguous, 2);
-  f.command(command_t::SWITCH_SOLVER, "mh");
-  f.command(command_t::OPTIMIZE);
-  s = f.fullStatus();
-  EXPECT_EQ(s.ambiguous, 2);
-  EXPECT_EQ(f.decision(s, 1)->alternative, 1);
-  EXPECT_EQ(f.decision(s, 2)->alternative, 0);
+  expectSwitchRoundTripKeeps(f, {{1, 1}, {2, 0}});
   EXPECT_TRUE(f.errors.empty());
 }
 
@@ -801,16 +808,7 @@ TEST(AmbiguousInterRobot, JournalResumeSwitchSolverAndRemoval) {
   EXPECT_EQ(h.fullStatus().ambiguous, 2);
 
   // SWITCH_SOLVER both ways keeps the groups and their anchored alternatives.
-  g.command(command_t::SWITCH_SOLVER, "isam2");
-  s = g.fullStatus();
-  EXPECT_EQ(s.solver, "isam2");
-  EXPECT_EQ(s.ambiguous, 2);
-  g.command(command_t::SWITCH_SOLVER, "mh");
-  g.command(command_t::OPTIMIZE);
-  s = g.fullStatus();
-  EXPECT_EQ(s.ambiguous, 2);
-  EXPECT_EQ(g.decision(s, 40)->alternative, 1);
-  EXPECT_EQ(g.decision(s, 41)->alternative, 0);
+  expectSwitchRoundTripKeeps(g, {{40, 1}, {41, 0}});
   // Removing a group after the resume, then one more under the (unchanged) link.
   g.send(batch("lc", 6, {}, {}, {41}));
   g.send(batch("lc", 7, {}, {group(44, A::MULTI_MEASUREMENT,
