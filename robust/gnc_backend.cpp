@@ -335,22 +335,33 @@ void GncBackend::optimize() {
       log += buf + bestName + " (" + costs + ")";
       ++rounds;
     }
-    if (rounds > 0 && gnc_.readmit) {
-      // The shrunk gate is usually the median cap (medianFactor × the median): it got the
-      // solution out of the bent minimum, but true closures' tail can reach beyond it
+    bool tightened = gated;
+    for (int i = 0; i < n && tightened; ++i)
+      if (cbar[i] > 0.0) tightened = gate[i] < cbar[i];
+    if ((rounds > 0 || tightened) && gnc_.readmit) {
+      // A tightened (or shrunk) gate is usually the median cap (medianFactor × the median): it
+      // gets the solution out of bent minima, but true closures' tail can reach beyond it
       // (parking-garage: the largest 208× the median). Now that the solution has settled,
       // decide once more against the accepted closures' own tail extrapolation
-      // q99·(q99/q90)^tailExponent (no median cap), at most the first gate: rejected closures
-      // consistent with the solution come back.
+      // q99·(q99/q90)^tailExponent (no median cap), at most the first gate after gate rounds
+      // and at most c̄²/widenFactor (still a tightened gate): rejected closures consistent
+      // with the solution come back.
       std::vector<double> q;
       for (int i = 0; i < n; ++i)
         if (cbar[i] > 0.0 && weights_[i] >= 0.5)
           q.push_back(r2[i] / chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5));
       const TailGate t = tailGate(q, gnc_.tailExponent, 1e300);
-      const double g = std::min(t.gate, firstGate);
-      if (g > tailGate_) {
-        for (int i = 0; i < n; ++i)
-          if (cbar[i] > 0.0) gate[i] = g * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
+      const double g = rounds > 0 ? std::min(t.gate, firstGate) : t.gate;
+      bool wider = false;
+      std::vector<double> next = gate;
+      for (int i = 0; i < n; ++i)
+        if (cbar[i] > 0.0) {
+          next[i] = std::min(g * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5),
+                             cbar[i] / gnc_.widenFactor);
+          if (next[i] > gate[i]) wider = true;
+        }
+      if (wider) {
+        gate = next;
         c2 = gate;
         int before = 0;
         for (int i = 0; i < n; ++i) before += cbar[i] > 0.0 && weights_[i] < 0.5;
