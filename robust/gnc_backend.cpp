@@ -57,6 +57,19 @@ void GncBackend::updateWeights(const std::vector<double>& r2, const std::vector<
   }
 }
 
+Values GncBackend::trustedLinearStart() const {
+  FactorGraph trusted;
+  for (const auto& f : graph_.factors())
+    if (!isUncertain(f->role())) trusted.add(f);
+  Key anchor = 0;
+  bool found = false;
+  for (int s = 0; s < estimate_.size(); ++s)
+    if (keyKind(estimate_.key(s)) == KeyKind::Pose && (!found || estimate_.key(s) < anchor))
+      anchor = estimate_.key(s), found = true;
+  if (!found || trusted.empty()) return Values();
+  return initializeLinear(trusted, estimate_, anchor);
+}
+
 void GncBackend::optimize() {
   if (graph_.empty()) return;
   // The odometry start: the trusted factors' linear initialization (recomputed on every run;
@@ -64,32 +77,13 @@ void GncBackend::optimize() {
   Values odometryStart;
   const bool wantOdometryStart = gnc_.odometryStart && gnc_.trustedInitialization &&
                                  (firstSolve_ ? options_.linearInitialization : trustedInit_);
-  if (wantOdometryStart) {
-    FactorGraph trusted;
-    for (const auto& f : graph_.factors())
-      if (!isUncertain(f->role())) trusted.add(f);
-    Key anchor = 0;
-    bool found = false;
-    for (int s = 0; s < estimate_.size(); ++s)
-      if (keyKind(estimate_.key(s)) == KeyKind::Pose && (!found || estimate_.key(s) < anchor))
-        anchor = estimate_.key(s), found = true;
-    if (found && !trusted.empty()) odometryStart = initializeLinear(trusted, estimate_, anchor);
-  }
+  if (wantOdometryStart) odometryStart = trustedLinearStart();
   if (firstSolve_ && options_.linearInitialization && gnc_.trustedInitialization) {
     trustedInit_ = true;
     // Linear initialization from the trusted factors only; the base class must not redo it
     // with the outliers included.
-    FactorGraph trusted;
-    for (const auto& f : graph_.factors())
-      if (!isUncertain(f->role())) trusted.add(f);
-    Key anchor = 0;
-    bool found = false;
-    for (int s = 0; s < estimate_.size(); ++s)
-      if (keyKind(estimate_.key(s)) == KeyKind::Pose && (!found || estimate_.key(s) < anchor))
-        anchor = estimate_.key(s), found = true;
-    if (found && !trusted.empty())
-      estimate_ = odometryStart.size() > 0 ? odometryStart
-                                           : initializeLinear(trusted, estimate_, anchor);
+    const Values start = odometryStart.size() > 0 ? odometryStart : trustedLinearStart();
+    if (start.size() > 0) estimate_ = start;
     options_.linearInitialization = false;
   }
   firstSolve_ = false;

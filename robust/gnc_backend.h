@@ -100,6 +100,9 @@ class GncBackend : public BatchBackend {
 
  private:
   double barc2(const Factor& f) const;
+  /// The trusted factors' linear initialization from the lowest pose (the odometry start);
+  /// empty without a pose or a trusted factor.
+  Values trustedLinearStart() const;
   void updateWeights(const std::vector<double>& r2, const std::vector<double>& c2);
 
   GncOptions gnc_;

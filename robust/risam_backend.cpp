@@ -370,18 +370,7 @@ void RisamBackend::optimize() {
   // threshold) are put in at weight 1 together; kept if the truncated cost
   // Σ_trusted χ² + Σ min(χ², threshold) went down at the new optimum, else taken out again.
   for (int round = 0; round < options_.finalCandidateRounds; ++round) {
-    std::vector<FactorId> candidates;
-    int tested = 0;
-    for (FactorId id : rejected()) {
-      if (tested >= options_.retryMaxTests) break;
-      auto it = graduated_.find(id);
-      if (it == graduated_.end()) continue;
-      ++tested;
-      const Factor& f = *it->second.original;
-      if (predictedChi2(f) <= std::max(chi2Quantile(std::max(f.dim(), 1), options_.retryProbability),
-                                       rejectChi2(f.dim())))
-        candidates.push_back(id);
-    }
+    const std::vector<FactorId> candidates = retryCandidates();
     if (candidates.empty()) break;
     const double before = truncatedCost();
     decideAndSolve(&candidates);
@@ -486,11 +475,10 @@ double RisamBackend::predictedChi2(const Factor& f) {
   return r.dot(ldlt.solve(r));
 }
 
-int RisamBackend::retryRejected() {
-  std::vector<FactorId> retry;
+std::vector<FactorId> RisamBackend::retryCandidates() {
+  std::vector<FactorId> out;
   int tested = 0;
-  const std::vector<FactorId> rej = rejected();
-  for (FactorId id : rej) {
+  for (FactorId id : rejected()) {
     if (tested >= options_.retryMaxTests) break;
     auto it = graduated_.find(id);
     if (it == graduated_.end()) continue;
@@ -498,8 +486,13 @@ int RisamBackend::retryRejected() {
     const Factor& f = *it->second.original;
     if (predictedChi2(f) <= std::max(chi2Quantile(std::max(f.dim(), 1), options_.retryProbability),
                                      rejectChi2(f.dim())))
-      retry.push_back(id);
+      out.push_back(id);
   }
+  return out;
+}
+
+int RisamBackend::retryRejected() {
+  const std::vector<FactorId> retry = retryCandidates();
   if (retry.empty()) return 0;
   // Graduate them again from μ_init, as new arrivals.
   double mu = options_.muInit;

@@ -120,6 +120,9 @@ class RisamBackend : public DecoratorBackend {
   double rejectChi2(int dim) const;
   void refreshGate();
   double predictedChi2(const Factor& f);
+  /// Rejected closures (at most retryMaxTests tested) whose predicted χ² increase passes the
+  /// retry test: what retryRejected() and optimize()'s candidate rounds put back.
+  std::vector<FactorId> retryCandidates();
   int retryRejected();
   /// After optimize(): every decided closure back to its SIG kernel at μ = 1.
   void restoreGraduated();
