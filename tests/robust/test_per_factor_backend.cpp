@@ -10,10 +10,9 @@
 #include "robust/backend_registry.h"
 #include "robust/per_factor_backend.h"
 #include "solvers/io/dataset_reader.h"
-#include "solvers/problem/incremental_schedule.h"
-#include "solvers/problem/initial_guess.h"
 #include "solvers/problem/pose_graph_problem.h"
 #include "tools/loopd-outliers/outlier_generator.h"
+#include "tools/loopd-solve/online_run.h"
 
 namespace loopd {
 namespace {
@@ -54,17 +53,7 @@ void request(const Data& d, const std::string& outlier, const std::string& inlie
 
 std::unique_ptr<PerFactorRobustBackend> feed(const std::string& solver, const Data& d) {
   auto b = std::make_unique<PerFactorRobustBackend>(makeBackend(solver));
-  const PoseGraphProblem& p = d.problem;
-  const auto steps = incrementalSchedule(p);
-  for (size_t i = 0; i < steps.size(); ++i) {
-    BackendUpdate u;
-    for (int f : steps[i].factors) u.factors.push_back(p.graph[f]);
-    if (!b->estimate().contains(steps[i].pose) && (i == 0 || u.factors.empty()))
-      u.initial.insertFrom(p.initial, p.initial.slot(steps[i].pose));
-    predictMissingValues(u.factors, b->estimate(), u.initial);
-    b->update(u);
-  }
-  b->optimize();
+  tools::runOnline(*b, d.problem, /*quiet=*/true);
   return b;
 }
 

@@ -9,31 +9,13 @@
 
 #include "robust/risam_backend.h"
 #include "solvers/incremental/isam2.h"
-#include "solvers/io/dataset_reader.h"
 #include "solvers/problem/incremental_schedule.h"
 #include "solvers/problem/initial_guess.h"
 #include "solvers/problem/pose_graph_problem.h"
+#include "tests/robust/dataset_prefix.h"
 
 namespace loopd {
 namespace {
-
-const std::string kDatasets = LOOPD_DATASETS_DIR;
-
-io::Dataset manhattanPrefix(std::int64_t n) {
-  io::Dataset d = io::readDataset(kDatasets + "/manhattan.g2o");
-  std::vector<io::Vertex> poses;
-  for (const auto& v : d.poses)
-    if (v.id < n) poses.push_back(v);
-  std::vector<io::Edge> edges;
-  for (const auto& e : d.edges)
-    if (e.from < n && e.to < n) {
-      edges.push_back(e);
-      edges.back().index = static_cast<int>(edges.size()) - 1;
-    }
-  d.poses = std::move(poses);
-  d.edges = std::move(edges);
-  return d;
-}
 
 struct OnlineCounts {
   int updates = 0, closureUpdates = 0, innerUpdates = 0;
@@ -70,7 +52,7 @@ OnlineCounts runOnline(const PoseGraphProblem& p) {
 }
 
 TEST(RisamOnline, KeepsManhattansStiffClosuresAndGraduatesCheaply) {
-  const PoseGraphProblem p = buildProblem(manhattanPrefix(1500));
+  const PoseGraphProblem p = buildProblem(test::loadPrefix("manhattan.g2o:1500"));
   const OnlineCounts c = runOnline(p);
   std::printf("[risam] manhattan:1500 updates %d (closures %d) inner updates %d, rejected online "
               "%zu, after optimize %zu, chi2 %.6g\n",

@@ -12,19 +12,18 @@
 
 #include "robust/backend_registry.h"
 #include "robust/gnc_backend.h"
+#include "tests/robust/dataset_prefix.h"
 #include "solvers/io/dataset_reader.h"
-#include "solvers/problem/incremental_schedule.h"
-#include "solvers/problem/initial_guess.h"
 #include "solvers/problem/pose_graph_problem.h"
 #include "tools/loopd-eval/trajectory_metrics.h"
 #include "tools/loopd-outliers/outlier_generator.h"
+#include "tools/loopd-solve/online_run.h"
 
 namespace loopd {
 namespace {
 
 using tools::OutlierMode;
 
-const std::string kDatasets = LOOPD_DATASETS_DIR;
 
 struct RunResult {
   double inlierChi2 = 0.0;
@@ -33,28 +32,20 @@ struct RunResult {
   double seconds = 0.0;
 };
 
+// Every factor and the file's values in one update (how loopd-solve solves in batch).
+void feedAll(Backend& b, const PoseGraphProblem& p) {
+  BackendUpdate all;
+  all.factors = p.graph.factors();
+  all.initial = p.initial;
+  b.update(all);
+}
+
 // Feeds the problem pose by pose (as loopd-solve --incremental does), or all at once.
 std::unique_ptr<Backend> solve(const std::string& variant, const PoseGraphProblem& p,
                                bool incremental) {
   auto b = makeBackend(variant);
-  if (!incremental) {
-    BackendUpdate all;
-    all.factors = p.graph.factors();
-    all.initial = p.initial;
-    b->update(all);
-    return b;
-  }
-  const auto steps = incrementalSchedule(p);
-  for (size_t i = 0; i < steps.size(); ++i) {
-    BackendUpdate u;
-    for (int f : steps[i].factors) u.factors.push_back(p.graph[f]);
-    if (!b->estimate().contains(steps[i].pose) && (i == 0 || u.factors.empty()))
-      u.initial.insertFrom(p.initial, p.initial.slot(steps[i].pose));
-    if (!predictMissingValues(u.factors, b->estimate(), u.initial))
-      throw std::runtime_error("cannot initialise pose");
-    b->update(u);
-  }
-  b->optimize();
+  if (incremental) tools::runOnline(*b, p, /*quiet=*/true);
+  else feedAll(*b, p);
   return b;
 }
 
@@ -88,25 +79,7 @@ struct Reference {
   double optimumChi2 = 0.0;
 };
 
-// "intel.g2o:600": the first 600 poses and the edges among them (keeps the suite fast).
-io::Dataset loadPrefix(const std::string& spec) {
-  const size_t colon = spec.find(':');
-  io::Dataset d = io::readDataset(kDatasets + "/" + spec.substr(0, colon));
-  if (colon == std::string::npos) return d;
-  const std::int64_t n = std::stoll(spec.substr(colon + 1));
-  std::vector<io::Vertex> poses;
-  for (const auto& v : d.poses)
-    if (v.id < n) poses.push_back(v);
-  std::vector<io::Edge> edges;
-  for (const auto& e : d.edges)
-    if (e.from < n && e.to < n) {
-      edges.push_back(e);
-      edges.back().index = static_cast<int>(edges.size()) - 1;
-    }
-  d.poses = std::move(poses);
-  d.edges = std::move(edges);
-  return d;
-}
+using test::loadPrefix;
 
 const Reference& reference(const std::string& file) {
   static std::map<std::string, Reference> cache;
@@ -251,10 +224,7 @@ TEST(NoiseAwareGnc, KeepsManhattansHeavyTailedTrueClosures) {
       GncOptions g;
       g.tailExponent = tailExponent;
       GncBackend b(BackendOptions{}, g);
-      BackendUpdate all;
-      all.factors = p.graph.factors();
-      all.initial = p.initial;
-      b.update(all);
+      feedAll(b, p);
       RunResult r = score(b, p, data);
       std::printf("[robust] gnc-tls manhattan:1500 %s %d, tail exponent %g: recall %.3f "
                   "precision %.3f chi2(true) %.6g vs %.6g (%s)\n",
@@ -290,10 +260,7 @@ TEST(GncOdometryStart, EscapesTheMinimumGroupsBendTheStartInto) {
     GncOptions g;
     g.odometryStart = odometryStart;
     GncBackend b(BackendOptions{}, g);
-    BackendUpdate all;
-    all.factors = p.graph.factors();
-    all.initial = p.initial;
-    b.update(all);
+    feedAll(b, p);
     RunResult r = score(b, p, data);
     std::printf("[robust] gnc-tls intel group 100, odometry start %d: recall %.3f precision %.3f "
                 "chi2(true) %.6g vs %.6g (%s)\n",
