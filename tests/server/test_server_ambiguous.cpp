@@ -176,6 +176,25 @@ void expectSwitchRoundTripKeeps(Fixture& f, const std::vector<std::pair<std::int
   }
 }
 
+// A journal replayed against the run that wrote it: each group's choice, chi2 and the poses
+// (x, y of each, in the same order).
+void expectResumedAsWritten(const Fixture& g, const status_t& s, const status_t& first,
+                            std::initializer_list<std::int64_t> groups,
+                            const std::vector<std::vector<double>>& resumed,
+                            const std::vector<std::vector<double>>& written) {
+  for (std::int64_t gid : groups) {
+    ASSERT_NE(g.decision(s, gid), nullptr);
+    EXPECT_EQ(g.decision(s, gid)->alternative, g.decision(first, gid)->alternative);
+  }
+  EXPECT_NEAR(s.chi2, first.chi2, 1e-6 * (1 + first.chi2));
+  ASSERT_EQ(resumed.size(), written.size());
+  for (size_t n = 0; n < resumed.size(); ++n) {
+    ASSERT_EQ(resumed[n].size(), 3u);
+    EXPECT_NEAR(resumed[n][0], written[n][0], 1e-6);
+    EXPECT_NEAR(resumed[n][1], written[n][1], 1e-6);
+  }
+}
+
 // --- validation ---------------------------------------------------------------------------
 
 TEST(AmbiguousValidation, WellFormedGroupsPass) {
@@ -518,18 +537,10 @@ TEST(AmbiguousEngine, JournalResumeReplaysTheGroups) {
   EXPECT_EQ(s.ambiguous, 2);
   EXPECT_EQ(s.ambiguous, first.ambiguous);
   EXPECT_EQ(s.factors, first.factors);
-  for (std::int64_t gid : {1, 2}) {
-    ASSERT_NE(g.decision(s, gid), nullptr);
-    EXPECT_EQ(g.decision(s, gid)->alternative, g.decision(first, gid)->alternative);
-  }
+  std::vector<std::vector<double>> resumed;
+  for (int i = 0; i <= 16; ++i) resumed.push_back(g.pose(i));
+  expectResumedAsWritten(g, s, first, {1, 2}, resumed, poses);
   EXPECT_EQ(g.decision(s, 1)->alternative, 1);
-  EXPECT_NEAR(s.chi2, first.chi2, 1e-6 * (1 + first.chi2));
-  for (int i = 0; i <= 16; ++i) {
-    const auto x = g.pose(i);
-    ASSERT_EQ(x.size(), 3u);
-    EXPECT_NEAR(x[0], poses[i][0], 1e-6);
-    EXPECT_NEAR(x[1], poses[i][1], 1e-6);
-  }
   // The ids are known after the resume: removal of the replayed removal's id is refused.
   g.send(batch("lc", 6, {}, {}, {3}));
   EXPECT_EQ(g.errors.back().code, loopd::error_t::UNKNOWN_FACTOR_ID);
@@ -788,19 +799,10 @@ TEST(AmbiguousInterRobot, JournalResumeSwitchSolverAndRemoval) {
   EXPECT_EQ(s.ambiguous, 2);
   EXPECT_EQ(s.factors, first.factors);
   EXPECT_EQ(s.robots_in_common_frame, 2);
-  for (std::int64_t gid : {40, 41}) {
-    ASSERT_NE(g.decision(s, gid), nullptr);
-    EXPECT_EQ(g.decision(s, gid)->alternative, g.decision(first, gid)->alternative);
-  }
-  EXPECT_NEAR(s.chi2, first.chi2, 1e-6 * (1 + first.chi2));
-  size_t n = 0;
+  std::vector<std::vector<double>> resumed;
   for (int r = 0; r < 2; ++r)
-    for (int i = 0; i <= (r == 0 ? 16 : 8); ++i, ++n) {
-      const auto x = robotPose(g, r, i);
-      ASSERT_EQ(x.size(), 3u);
-      EXPECT_NEAR(x[0], poses[n][0], 1e-6);
-      EXPECT_NEAR(x[1], poses[n][1], 1e-6);
-    }
+    for (int i = 0; i <= (r == 0 ? 16 : 8); ++i) resumed.push_back(robotPose(g, r, i));
+  expectResumedAsWritten(g, s, first, {40, 41}, resumed, poses);
   // Another solver on the same journal flattens the same groups.
   Fixture h("dcs");
   h.engine.replay(path, false, nullptr);
