@@ -6,6 +6,7 @@
 #include <unordered_map>
 #include <cstdio>
 
+#include "robust/pairwise_consistency.h"
 #include "robust/robust_factors.h"
 #include "solvers/init/initialization.h"
 
@@ -25,6 +26,16 @@ TailGate tailGate(std::vector<double> q, double exponent, double medianFactor) {
   t.gate = std::min(medianFactor * t.scale, p99 * std::pow(p99 / p90, exponent));
   return t;
 }
+
+namespace {
+
+double median(std::vector<double> v, double fallback) {
+  if (v.empty()) return fallback;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
 
 GncBackend::GncBackend(BackendOptions options, GncOptions gnc)
     : BatchBackend(std::move(options)), gnc_(gnc) {}
@@ -57,10 +68,10 @@ void GncBackend::updateWeights(const std::vector<double>& r2, const std::vector<
   }
 }
 
-Values GncBackend::trustedLinearStart() const {
+Values GncBackend::trustedLinearStart(const std::vector<char>& alsoUse) const {
   FactorGraph trusted;
-  for (const auto& f : graph_.factors())
-    if (!isUncertain(f->role())) trusted.add(f);
+  for (int i = 0; i < graph_.size(); ++i)
+    if (!isUncertain(graph_[i]->role()) || (!alsoUse.empty() && alsoUse[i])) trusted.add(graph_[i]);
   Key anchor = 0;
   bool found = false;
   for (int s = 0; s < estimate_.size(); ++s)
@@ -106,6 +117,24 @@ void GncBackend::optimize() {
   std::string reason;
   OptimizerResult last;
   const bool noiseAware = gnc_.tailExponent >= 0.0 && options_.robustParameter <= 0.0;
+  // Solves with at most `cap` LM iterations (0: the optimizer's own limit), which the
+  // intermediate solves need only to track the weights; the kept solution is polished.
+  const int fullIterations = optimizer().options().maxIterations;
+  auto capped = [&](int cap, auto&& solve) {
+    optimizer().options().maxIterations = cap > 0 ? std::min(cap, fullIterations) : fullIterations;
+    try {
+      solve();
+    } catch (...) {
+      optimizer().options().maxIterations = fullIterations;
+      throw;
+    }
+    optimizer().options().maxIterations = fullIterations;
+  };
+  auto solveCapped = [&](int cap) {
+    capped(cap, [&] { last = solveOnce(); });
+    iterations += last.iterations;
+    residuals();
+  };
 
   // One GNC with thresholds c2: from `start` (first: the current estimate) the plain
   // least-squares solve, then the μ steps; or (fromOdometry) the μ steps straight from the
@@ -116,7 +145,8 @@ void GncBackend::optimize() {
       estimate_.assignFrom(odometryStart);
     } else {
       if (!first) estimate_.assignFrom(start);
-      BatchBackend::optimize();  // plain least squares (all weights 1)
+      // Plain least squares (all weights 1); capped when the GNC follows (it only starts it).
+      capped(anyUncertain ? gnc_.stepIterations : 0, [&] { BatchBackend::optimize(); });
       iterations += summary_.iterations;
       if (first) initialChi2 = summary_.initialChi2;
       last.finalChi2 = summary_.finalChi2;
@@ -135,11 +165,7 @@ void GncBackend::optimize() {
       if (maxRatio <= 1.0) {
         mu_ = 0.0;
         reason = "gnc: every residual below the inlier threshold";
-        if (fromOdometry) {
-          last = solveOnce();
-          iterations += last.iterations;
-          residuals();
-        }
+        solveCapped(0);  // every closure in: the plain least squares, to convergence
         return;
       }
       mu_ = std::max(1e-6, 1.0 / (2.0 * maxRatio - 1.0));
@@ -148,9 +174,7 @@ void GncBackend::optimize() {
     for (outer_ = 1; outer_ <= gnc_.maxOuterIterations; ++outer_) {
       updateWeights(r2, c2);
       if (!gnc_.warmStart) estimate_.assignFrom(start);
-      last = solveOnce();
-      iterations += last.iterations;
-      residuals();
+      solveCapped(gnc_.stepIterations);
       const double cost = last.finalWeightedCost;
       if (gnc_.loss == GncLoss::GemanMcClure && mu_ <= 1.0) {
         reason = "gnc: mu reached 1";
@@ -218,8 +242,9 @@ void GncBackend::optimize() {
     return false;
   };
   const bool gated = noiseAware && estimateGate(gate);  // refine, redo with the gate
-  // Refinement: decide 0/1 against the gate at the current estimate, re-solve, repeat.
-  auto refine = [&] {
+  // Refinement: decide 0/1 against the gate at the current estimate, re-solve (at most
+  // `cap` iterations each), repeat.
+  auto refine = [&](int cap) {
     for (int it = 0; it < gnc_.maxRefineIterations; ++it) {
       bool changed = false;
       for (int i = 0; i < n; ++i) {
@@ -230,12 +255,11 @@ void GncBackend::optimize() {
       }
       if (!changed && it > 0) break;
       ++refine_;
-      last = solveOnce();
-      iterations += last.iterations;
-      residuals();
+      solveCapped(cap);
       if (!changed) break;
     }
   };
+  const int refineCap = gnc_.refineIterations;
   // The truncated cost every candidate minimizes: trusted χ² + Σ min(χ², gate).
   auto tlsCost = [&] {
     double cost = 0.0;
@@ -264,26 +288,26 @@ void GncBackend::optimize() {
   const bool odometryCandidate = odometryStart.size() == estimate_.size() && odometryStart.size() > 0;
   if (gated || odometryCandidate) {
     // Candidates, the one with the lowest truncated cost kept. A: the first GNC (refined
-    // against the gate). B (gate acting): the GNC redone from the same start with c̄² = gate —
+    // against the gate). B (gate acting, rerunWithGate): the GNC redone from the same start with c̄² = gate —
     // heavy-tailed closures (over-confident information) may have been dropped by the
     // χ²_dim(p) threshold in the non-convex phase. C: the GNC from the odometry start (no
     // least-squares solve with every closure: outliers cannot bend the start), with the same
     // thresholds.
-    if (gated) refine();
+    if (gated) refine(refineCap);
     consider("first");
     const int firstOuter = outer_;
     c2 = gate;
-    if (gated) {
+    if (gated && (gnc_.rerunWithGate || !odometryCandidate)) {
       gncPass(false);
       outer_ += firstOuter;
-      refine();
+      refine(refineCap);
       consider("redone with the gate");
     }
     if (odometryCandidate) {
       const int before = outer_;
       gncPass(false, true);
       outer_ += before;
-      if (gated) refine();
+      if (gated) refine(refineCap);
       consider("from odometry");
     }
     estimate_.assignFrom(best.estimate);
@@ -311,13 +335,13 @@ void GncBackend::optimize() {
       c2 = gate;
       bestName.clear();
       costs.clear();
-      refine();
+      refine(refineCap);
       consider("kept, refined");
       if (odometryCandidate) {
         const int before = outer_;
         gncPass(false, true);
         outer_ += before;
-        refine();
+        refine(refineCap);
         consider("from odometry");
       }
       estimate_.assignFrom(best.estimate);
@@ -359,7 +383,7 @@ void GncBackend::optimize() {
         c2 = gate;
         int before = 0;
         for (int i = 0; i < n; ++i) before += cbar[i] > 0.0 && weights_[i] < 0.5;
-        refine();
+        refine(refineCap);
         int after = 0;
         for (int i = 0; i < n; ++i) after += cbar[i] > 0.0 && weights_[i] < 0.5;
         char buf[128];
@@ -369,6 +393,77 @@ void GncBackend::optimize() {
         tailGate_ = g;
       }
     }
+  }
+  if (odometryCandidate && gnc_.consistentStart) {
+    // Consistent groups of wrong closures can bend the map from both starts (intel, 1000 in
+    // groups of 10). If anything is rejected, start once more from the largest pairwise
+    // consistent set of closures (PCM) — its linear initialization with the trusted factors —
+    // decide 0/1 against the gate there, and keep it if its truncated cost is lower.
+    int rejectedNow = 0;
+    for (int i = 0; i < n; ++i) rejectedNow += cbar[i] > 0.0 && weights_[i] < 0.5;
+    if (rejectedNow > 0) {
+      c2 = gate;
+      ConsistencyOptions pcm;
+      pcm.probability = gnc_.consistencyProbability;
+      std::vector<double> qOdometry, qClosures;
+      for (int i = 0; i < n; ++i) {
+        const double q = (cbar[i] > 0.0 ? r2[i] : graph_[i]->chi2(estimate_)) /
+                         chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
+        if (graph_[i]->role() == FactorRole::Odometry) qOdometry.push_back(q);
+        else if (cbar[i] > 0.0 && weights_[i] >= 0.5) qClosures.push_back(q);
+      }
+      pcm.odometryScale = median(qOdometry, 1.0);
+      pcm.closureScale = median(qClosures, 1.0);
+      const ConsistentSet set = pairwiseConsistentClosures(graph_, odometryStart, pcm);
+      const Values consistentStart = set.size > 0 ? trustedLinearStart(set.member) : Values();
+      char buf[200];
+      if (consistentStart.size() == estimate_.size()) {
+        const double before = tlsCost();
+        const Values keptEstimate = estimate_;
+        const std::vector<double> keptWeights = weights_, keptR2 = r2;
+        const OptimizerResult keptLast = last;
+        estimate_.assignFrom(consistentStart);
+        for (int i = 0; i < n; ++i)
+          if (cbar[i] > 0.0) weights_[i] = set.member[i] ? 1.0 : 0.0;
+        solveCapped(refineCap);
+        // The gate from this (clean) solution's accepted closures, if it acts; adopted with
+        // the candidate.
+        std::vector<double> candidateGate = gate;
+        const double usedScale = scale_, usedGate = tailGate_;
+        const bool ownGate = noiseAware && estimateGate(candidateGate);
+        const double candidateScale = scale_, candidateTail = tailGate_;
+        scale_ = usedScale, tailGate_ = usedGate;
+        const std::vector<double> keptGate = gate;
+        gate = candidateGate;
+        refine(refineCap);
+        gate = keptGate;  // both judged by the same truncated cost
+        const double after = tlsCost();
+        const bool keep = after < before;
+        if (keep && ownGate) {
+          gate = candidateGate;
+          scale_ = candidateScale, tailGate_ = candidateTail;
+        }
+        if (!keep) {
+          estimate_.assignFrom(keptEstimate);
+          weights_ = keptWeights;
+          r2 = keptR2;
+          last = keptLast;
+        }
+        std::snprintf(buf, sizeof buf,
+                      "; from the consistent set (%d of %d closures; scales %.3g, %.3g): %s (truncated cost %.6g vs %.6g)",
+                      set.size, set.judged, pcm.odometryScale, pcm.closureScale, keep ? "kept" : "dropped",
+                      after, before);
+      } else {
+        std::snprintf(buf, sizeof buf, "; consistent set: %d of %d closures, no start", set.size, set.judged);
+      }
+      log += buf;
+    }
+  }
+  // The kept solution, solved to convergence (its solves were capped); with the gate acting,
+  // its decisions re-made at the converged estimate.
+  if (anyUncertain) {
+    if (gated) refine(0);
+    else solveCapped(0);
   }
   if (gnc_.recheckRejected) {
     // Final re-check of the rejected closures against the map's own uncertainty: accepting
@@ -448,7 +543,7 @@ void GncBackend::optimize() {
       last = solveOnce();
       iterations += last.iterations;
       residuals();
-      refine();
+      refine(0);
       const double after = tlsCost();
       char buf[160];
       if (after < before) {

@@ -1,0 +1,216 @@
+#include "robust/pairwise_consistency.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numeric>
+#include <unordered_map>
+
+#include "robust/robust_factors.h"
+#include "solvers/factors/between_factor_se2.h"
+#include "solvers/factors/between_factor_se3.h"
+
+namespace loopd {
+namespace {
+
+// Poses of both dimensions as rigid motions of 3-space (2D: rotation about z, z = 0), so one
+// cycle test serves both.
+struct Rigid {
+  Mat3 R = Mat3::Identity();
+  Vec3 t = Vec3::Zero();
+  Rigid operator*(const Rigid& o) const { return {R * o.R, R * o.t + t}; }
+  Rigid inverse() const { return {R.transpose(), -(R.transpose() * t)}; }
+};
+
+Rigid fromSE2(const SE2& x) {
+  Rigid r;
+  r.R.topLeftCorner<2, 2>() = x.R();
+  r.t << x.x, x.y, 0.0;
+  return r;
+}
+
+Rigid fromSE3(const SE3& x) { return {x.R, x.t}; }
+
+double rotationAngle(const Mat3& R) {
+  const Vec3 v(R(2, 1) - R(1, 2), R(0, 2) - R(2, 0), R(1, 0) - R(0, 1));
+  return std::atan2(0.5 * v.norm(), 0.5 * (R.trace() - 1.0));
+}
+
+// A between factor's measurement and isotropic variances (trace/dim of its covariance's
+// translation and rotation blocks); false for other factors.
+struct Link {
+  Key from = 0, to = 0;
+  Rigid z;
+  double varT = 0.0, varR = 0.0;
+};
+
+bool asLink(const Factor& f, Link& out) {
+  if (const auto* b = dynamic_cast<const BetweenFactorSE2*>(&f)) {
+    const Eigen::Matrix3d cov = b->information().inverse();
+    out = {f.key(0), f.key(1), fromSE2(b->measured()), 0.5 * (cov(0, 0) + cov(1, 1)), cov(2, 2)};
+  } else if (const auto* b3 = dynamic_cast<const BetweenFactorSE3*>(&f)) {
+    const Mat6 cov = b3->information().inverse();
+    out = {f.key(0), f.key(1), fromSE3(b3->measured()), cov.topLeftCorner<3, 3>().trace() / 3.0,
+           cov.bottomRightCorner<3, 3>().trace() / 3.0};
+  } else {
+    return false;
+  }
+  return std::isfinite(out.varT) && std::isfinite(out.varR) && out.varT >= 0.0 && out.varR >= 0.0;
+}
+
+// Greedy clique: take nodes in `order`, each if adjacent to every node taken so far.
+std::vector<int> greedyClique(const std::vector<std::uint64_t>& adjacency, size_t words,
+                              const std::vector<int>& order) {
+  std::vector<std::uint64_t> candidates(words, ~std::uint64_t{0});
+  std::vector<int> clique;
+  for (int v : order) {
+    if (!(candidates[v / 64] >> (v % 64) & 1u)) continue;
+    clique.push_back(v);
+    const std::uint64_t* row = &adjacency[static_cast<size_t>(v) * words];
+    for (size_t w = 0; w < words; ++w) candidates[w] &= row[w];
+  }
+  return clique;
+}
+
+}  // namespace
+
+ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values& odometry,
+                                         const ConsistencyOptions& options) {
+  ConsistentSet out;
+  out.member.assign(graph.size(), 0);
+
+  // The odometry chain: poses in key order; step k joins chain poses k and k+1.
+  std::vector<Key> poseKeys;
+  bool planar = true;
+  for (int s = 0; s < odometry.size(); ++s) {
+    if (keyKind(odometry.key(s)) != KeyKind::Pose) continue;
+    poseKeys.push_back(odometry.key(s));
+    planar = planar && odometry.type(s) == VarType::SE2;
+  }
+  std::sort(poseKeys.begin(), poseKeys.end());
+  const int n = static_cast<int>(poseKeys.size());
+  if (n < 3) return out;
+  std::unordered_map<Key, int> index;
+  std::vector<Rigid> pose(n);
+  for (int k = 0; k < n; ++k) {
+    index[poseKeys[k]] = k;
+    const int s = odometry.slot(poseKeys[k]);
+    pose[k] = planar ? fromSE2(odometry.se2(s)) : fromSE3(odometry.se3(s));
+  }
+  const double dimT = planar ? 2.0 : 3.0, dimR = planar ? 1.0 : 3.0;
+  const double lever = planar ? 1.0 : 2.0;  // axes a rotation error displaces a point along
+
+  std::vector<char> hasStep(n, 0);
+  std::vector<double> stepT(n, 0.0), stepR(n, 0.0);
+  std::vector<Link> closures;
+  std::vector<int> closureFactor;
+  for (int i = 0; i < graph.size(); ++i) {
+    const Factor& f = *graph[i];
+    Link l;
+    if (f.size() != 2 || !asLink(f, l)) continue;
+    const auto a = index.find(l.from), b = index.find(l.to);
+    if (a == index.end() || b == index.end()) continue;
+    if (f.role() == FactorRole::Odometry) {
+      const int lo = std::min(a->second, b->second);
+      if (std::abs(a->second - b->second) != 1 || hasStep[lo]) continue;
+      hasStep[lo] = 1;
+      stepT[lo] = options.odometryScale * l.varT;
+      stepR[lo] = options.odometryScale * l.varR;
+    } else if (f.role() == FactorRole::LoopClosure) {
+      l.varT *= options.closureScale;
+      l.varR *= options.closureScale;
+      closures.push_back(l);
+      closureFactor.push_back(i);
+    }
+  }
+
+  // Prefix sums over steps below chain pose k: Σ dim_t·σ_t², Σσ_r², Σσ_r²·p, Σσ_r²·|p|²
+  // (p: the step's end position, where its rotation error acts), and the chain segment.
+  std::vector<double> sumT(n, 0.0), sumR(n, 0.0), sumRpp(n, 0.0);
+  std::vector<Vec3> sumRp(n, Vec3::Zero());
+  std::vector<int> segment(n, 0);
+  for (int k = 1; k < n; ++k) {
+    const int s = k - 1;
+    const Vec3& p = pose[k].t;
+    sumT[k] = sumT[s] + dimT * stepT[s];
+    sumR[k] = sumR[s] + stepR[s];
+    sumRp[k] = sumRp[s] + stepR[s] * p;
+    sumRpp[k] = sumRpp[s] + stepR[s] * p.squaredNorm();
+    segment[k] = segment[s] + (hasStep[s] ? 0 : 1);
+  }
+  // The chain between poses u and v: translation variance at point q, rotation variance.
+  auto chain = [&](int u, int v, const Vec3& q, double& varT, double& varR) {
+    const int lo = std::min(u, v), hi = std::max(u, v);
+    const double r0 = sumR[hi] - sumR[lo];
+    varT += sumT[hi] - sumT[lo] +
+            lever * (q.squaredNorm() * r0 - 2.0 * q.dot(sumRp[hi] - sumRp[lo]) + sumRpp[hi] -
+                     sumRpp[lo]);
+    varR += dimR * r0;
+  };
+
+  struct Judged {
+    int a, b;  // chain indices of the closure's ends
+    Rigid z, zInverse;
+    double varT, varR;
+  };
+  std::vector<Judged> judged;
+  std::vector<int> judgedFactor;
+  for (size_t c = 0; c < closures.size(); ++c) {
+    const int a = index[closures[c].from], b = index[closures[c].to];
+    judged.push_back(
+        {a, b, closures[c].z, closures[c].z.inverse(), closures[c].varT, closures[c].varR});
+    judgedFactor.push_back(closureFactor[c]);
+  }
+  const int m = static_cast<int>(judged.size());
+  out.judged = m;
+  if (m == 0) return out;
+
+  const double gate = chi2Quantile(planar ? 3 : 6, options.probability);
+  const size_t words = (static_cast<size_t>(m) + 63) / 64;
+  std::vector<std::uint64_t> adjacency(static_cast<size_t>(m) * words, 0);
+  std::vector<int> degree(m, 0);
+  auto connect = [&](int i, int j) {
+    adjacency[static_cast<size_t>(i) * words + j / 64] |= std::uint64_t{1} << (j % 64);
+    adjacency[static_cast<size_t>(j) * words + i / 64] |= std::uint64_t{1} << (i % 64);
+    ++degree[i];
+    ++degree[j];
+  };
+  for (int i = 0; i < m; ++i) {
+    const Judged& ci = judged[i];
+    const Rigid xbInverse = pose[ci.b].inverse();  // x_b⁻¹
+    for (int j = i + 1; j < m; ++j) {
+      const Judged& cj = judged[j];
+      if (segment[ci.a] != segment[cj.a] || segment[ci.b] != segment[cj.b]) continue;
+      // Δ = z_j⁻¹·(x_c⁻¹x_a)·z_i·(x_b⁻¹x_d)
+      const Rigid delta =
+          cj.zInverse * (pose[cj.a].inverse() * pose[ci.a]) * ci.z * (xbInverse * pose[cj.b]);
+      const Vec3& pd = pose[cj.b].t;
+      double varT =
+          dimT * (ci.varT + cj.varT) + lever * (ci.varR * (pd - pose[ci.b].t).squaredNorm() +
+                                                cj.varR * (pd - pose[cj.a].t).squaredNorm());
+      double varR = dimR * (ci.varR + cj.varR);
+      chain(cj.a, ci.a, pd, varT, varR);
+      chain(ci.b, cj.b, pd, varT, varR);
+      const double angle = rotationAngle(delta.R);
+      const double mahalanobis = dimT * delta.t.squaredNorm() / std::max(varT, 1e-300) +
+                                 dimR * angle * angle / std::max(varR, 1e-300);
+      if (mahalanobis < gate) connect(i, j);
+    }
+  }
+
+  std::vector<int> order(m);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int x, int y) { return degree[x] > degree[y]; });
+  std::vector<int> best;
+  for (int seed = 0; seed < std::min(options.cliqueSeeds, m); ++seed) {
+    std::vector<int> seeded = order;
+    std::rotate(seeded.begin(), seeded.begin() + seed, seeded.begin() + seed + 1);
+    std::vector<int> clique = greedyClique(adjacency, words, seeded);
+    if (clique.size() > best.size()) best = std::move(clique);
+  }
+  for (int v : best) out.member[judgedFactor[v]] = 1;
+  out.size = static_cast<int>(best.size());
+  return out;
+}
+
+}  // namespace loopd

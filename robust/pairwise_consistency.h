@@ -1,0 +1,42 @@
+#pragma once
+// Pairwise consistency of loop closures on the odometry chain (PCM, Mangelson et al.,
+// ICRA 2018). Closures i = (a→b) and j = (c→d) are consistent when the cycle
+// c →(odometry) a →(z_i) b →(odometry) d →(z_j⁻¹) c closes within its uncertainty:
+//   Δ = z_j⁻¹·(x_c⁻¹x_a)·z_i·(x_b⁻¹x_d),   m = dim_t|Δ_t|²/V_t + dim_r|Δ_r|²/V_r < χ²_dim(p)
+// with x the odometry poses and V_t, V_r the cycle's translation and rotation variances:
+// the four links' own (isotropic: trace/dim of each link's covariance) plus, for
+// translation, every rotation error's lever arm to d (σ_r²·|p_d − p_k|², prefix sums along
+// the chain, so each pair costs O(1)). The set returned is the largest mutually consistent
+// set a greedy clique search finds (seeded from the best-connected closures). Wrong
+// closures agree with the odometry only by chance, true ones all agree with each other.
+//
+// Only pose–pose between closures whose four ends lie on one unbroken odometry chain are
+// judged; the rest (landmarks, closures across robots or chain breaks) are left out.
+#include <vector>
+
+#include "solvers/core/values.h"
+#include "solvers/graph/factor_graph.h"
+
+namespace loopd {
+
+struct ConsistencyOptions {
+  double probability = 0.999;  // the cycle test's χ²_dim quantile
+  /// Covariance multipliers (the noise scale of odometry and of closures: the median
+  /// normalized χ² at a solution; datasets' information is rarely calibrated).
+  double odometryScale = 1.0;
+  double closureScale = 1.0;
+  int cliqueSeeds = 8;  // greedy clique searches, each from one of the best-connected closures
+};
+
+struct ConsistentSet {
+  std::vector<char> member;  // per factor of the graph: 1 if in the consistent set
+  int judged = 0;            // closures that took part
+  int size = 0;              // closures in the set
+};
+
+/// The largest mutually consistent set of the graph's loop closures at `odometry` (the
+/// trusted factors' estimate: the odometry composed).
+ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values& odometry,
+                                         const ConsistencyOptions& options = {});
+
+}  // namespace loopd
