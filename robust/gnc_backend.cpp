@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <unordered_map>
 #include <cstdio>
+#include <unordered_map>
 
 #include "robust/pairwise_consistency.h"
 #include "robust/robust_factors.h"
@@ -61,9 +61,12 @@ void GncBackend::updateWeights(const std::vector<double>& r2, const std::vector<
       weights_[i] = (a / (r + a)) * (a / (r + a));
     } else {
       const double lower = mu_ / (mu_ + 1.0) * c, upper = (mu_ + 1.0) / mu_ * c;
-      if (r <= lower) weights_[i] = 1.0;
-      else if (r >= upper) weights_[i] = 0.0;
-      else weights_[i] = std::clamp(std::sqrt(c / r) * std::sqrt(mu_ * (mu_ + 1.0)) - mu_, 0.0, 1.0);
+      if (r <= lower)
+        weights_[i] = 1.0;
+      else if (r >= upper)
+        weights_[i] = 0.0;
+      else
+        weights_[i] = std::clamp(std::sqrt(c / r) * std::sqrt(mu_ * (mu_ + 1.0)) - mu_, 0.0, 1.0);
     }
   }
 }
@@ -195,8 +198,8 @@ void GncBackend::optimize() {
         break;
       }
       prevCost = cost;
-      mu_ = gnc_.loss == GncLoss::GemanMcClure ? std::max(1.0, mu_ / gnc_.muStep)
-                                               : mu_ * gnc_.muStep;
+      mu_ =
+          gnc_.loss == GncLoss::GemanMcClure ? std::max(1.0, mu_ / gnc_.muStep) : mu_ * gnc_.muStep;
     }
     outer_ = std::min(outer_, gnc_.maxOuterIterations);
     // Report the weights at the final estimate (the last solve moved it); the solve itself
@@ -206,7 +209,7 @@ void GncBackend::optimize() {
   gncPass(true);
   if (!anyUncertain) return;
   const std::string firstReason = reason;
-  std::string log;  // what the candidates did (gncPass overwrites `reason`)
+  std::string log;                      // what the candidates did (gncPass overwrites `reason`)
   const std::vector<double> cbar = c2;  // the χ²_dim(p) thresholds
   std::vector<double> gate = c2;        // the thresholds the candidates are judged by
   // The noise-aware gate from the closures the current solution accepts: the tail of their
@@ -285,11 +288,12 @@ void GncBackend::optimize() {
       bestName = name;
     }
   };
-  const bool odometryCandidate = odometryStart.size() == estimate_.size() && odometryStart.size() > 0;
+  const bool odometryCandidate =
+      odometryStart.size() == estimate_.size() && odometryStart.size() > 0;
   if (gated || odometryCandidate) {
     // Candidates, the one with the lowest truncated cost kept. A: the first GNC (refined
-    // against the gate). B (gate acting, rerunWithGate): the GNC redone from the same start with c̄² = gate —
-    // heavy-tailed closures (over-confident information) may have been dropped by the
+    // against the gate). B (gate acting, rerunWithGate): the GNC redone from the same start with c̄²
+    // = gate — heavy-tailed closures (over-confident information) may have been dropped by the
     // χ²_dim(p) threshold in the non-convex phase. C: the GNC from the odometry start (no
     // least-squares solve with every closure: outliers cannot bend the start), with the same
     // thresholds.
@@ -387,8 +391,9 @@ void GncBackend::optimize() {
         int after = 0;
         for (int i = 0; i < n; ++i) after += cbar[i] > 0.0 && weights_[i] < 0.5;
         char buf[128];
-        std::snprintf(buf, sizeof buf, "; re-check at the tail gate %.3g x chi2_dim(0.5): %d -> %d rejected",
-                      g, before, after);
+        std::snprintf(buf, sizeof buf,
+                      "; re-check at the tail gate %.3g x chi2_dim(0.5): %d -> %d rejected", g,
+                      before, after);
         log += buf;
         tailGate_ = g;
       }
@@ -409,8 +414,10 @@ void GncBackend::optimize() {
       for (int i = 0; i < n; ++i) {
         const double q = (cbar[i] > 0.0 ? r2[i] : graph_[i]->chi2(estimate_)) /
                          chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
-        if (graph_[i]->role() == FactorRole::Odometry) qOdometry.push_back(q);
-        else if (cbar[i] > 0.0 && weights_[i] >= 0.5) qClosures.push_back(q);
+        if (graph_[i]->role() == FactorRole::Odometry)
+          qOdometry.push_back(q);
+        else if (cbar[i] > 0.0 && weights_[i] >= 0.5)
+          qClosures.push_back(q);
       }
       pcm.odometryScale = median(qOdometry, 1.0);
       pcm.closureScale = median(qClosures, 1.0);
@@ -450,11 +457,13 @@ void GncBackend::optimize() {
           last = keptLast;
         }
         std::snprintf(buf, sizeof buf,
-                      "; from the consistent set (%d of %d closures; scales %.3g, %.3g): %s (truncated cost %.6g vs %.6g)",
-                      set.size, set.judged, pcm.odometryScale, pcm.closureScale, keep ? "kept" : "dropped",
-                      after, before);
+                      "; from the consistent set (%d of %d closures; scales %.3g, %.3g): %s "
+                      "(truncated cost %.6g vs %.6g)",
+                      set.size, set.judged, pcm.odometryScale, pcm.closureScale,
+                      keep ? "kept" : "dropped", after, before);
       } else {
-        std::snprintf(buf, sizeof buf, "; consistent set: %d of %d closures, no start", set.size, set.judged);
+        std::snprintf(buf, sizeof buf, "; consistent set: %d of %d closures, no start", set.size,
+                      set.judged);
       }
       log += buf;
     }
@@ -462,8 +471,10 @@ void GncBackend::optimize() {
   // The kept solution, solved to convergence (its solves were capped); with the gate acting,
   // its decisions re-made at the converged estimate.
   if (anyUncertain) {
-    if (gated) refine(0);
-    else solveCapped(0);
+    if (gated)
+      refine(0);
+    else
+      solveCapped(0);
   }
   if (gnc_.recheckRejected) {
     // Final re-check of the rejected closures against the map's own uncertainty: accepting
@@ -504,8 +515,10 @@ void GncBackend::optimize() {
           bool ok = true;
           for (int k = 0; k < f.size(); ++k) {
             const int slot = estimate_.slot(f.key(k));
-            if (slot < 0) ok = false;
-            else xp[k] = estimate_.data(slot);
+            if (slot < 0)
+              ok = false;
+            else
+              xp[k] = estimate_.data(slot);
             jp[k] = jb[k].data();
             fc += varDim(f.varType(k));
           }
@@ -547,15 +560,19 @@ void GncBackend::optimize() {
       const double after = tlsCost();
       char buf[160];
       if (after < before) {
-        std::snprintf(buf, sizeof buf, "; re-check: %zu rejected closures fit the map's uncertainty, kept (truncated cost %.6g -> %.6g)",
+        std::snprintf(buf, sizeof buf,
+                      "; re-check: %zu rejected closures fit the map's uncertainty, kept "
+                      "(truncated cost %.6g -> %.6g)",
                       admit.size(), before, after);
       } else {
         estimate_.assignFrom(keptEstimate);
         weights_ = keptWeights;
         r2 = keptR2;
         last = keptLast;
-        std::snprintf(buf, sizeof buf, "; re-check: %zu rejected closures tried, dropped (truncated cost %.6g vs %.6g)",
-                      admit.size(), before, after);
+        std::snprintf(
+            buf, sizeof buf,
+            "; re-check: %zu rejected closures tried, dropped (truncated cost %.6g vs %.6g)",
+            admit.size(), before, after);
       }
       log += buf;
     }
@@ -563,7 +580,8 @@ void GncBackend::optimize() {
   reason = firstReason + log;
   if (noiseAware) {
     char buf[160];
-    std::snprintf(buf, sizeof buf, "; noise scale %.3g, tail gate %.3g x chi2_dim(0.5)%s, %d refinement solves",
+    std::snprintf(buf, sizeof buf,
+                  "; noise scale %.3g, tail gate %.3g x chi2_dim(0.5)%s, %d refinement solves",
                   scale_, tailGate_, gated ? " (acting)" : "", refine_);
     reason += buf;
   }
@@ -584,8 +602,9 @@ std::vector<std::pair<FactorId, double>> GncBackend::decisions() const {
 
 std::vector<FactorId> GncBackend::rejected() const {
   std::vector<FactorId> out;
-  const double below = gnc_.rejectBelow > 0.0 ? gnc_.rejectBelow
-                       : gnc_.loss == GncLoss::GemanMcClure ? 0.25 : 0.5;
+  const double below = gnc_.rejectBelow > 0.0               ? gnc_.rejectBelow
+                       : gnc_.loss == GncLoss::GemanMcClure ? 0.25
+                                                            : 0.5;
   for (const auto& [id, w] : decisions())
     if (w < below) out.push_back(id);
   return out;

@@ -12,9 +12,9 @@
 
 #include "robust/backend_registry.h"
 #include "robust/gnc_backend.h"
-#include "tests/robust/dataset_prefix.h"
 #include "solvers/io/dataset_reader.h"
 #include "solvers/problem/pose_graph_problem.h"
+#include "tests/robust/dataset_prefix.h"
 #include "tools/loopd-eval/trajectory_metrics.h"
 #include "tools/loopd-outliers/outlier_generator.h"
 #include "tools/loopd-solve/online_run.h"
@@ -23,7 +23,6 @@ namespace loopd {
 namespace {
 
 using tools::OutlierMode;
-
 
 struct RunResult {
   double inlierChi2 = 0.0;
@@ -44,8 +43,10 @@ void feedAll(Backend& b, const PoseGraphProblem& p) {
 std::unique_ptr<Backend> solve(const std::string& variant, const PoseGraphProblem& p,
                                bool incremental) {
   auto b = makeBackend(variant);
-  if (incremental) tools::runOnline(*b, p, /*quiet=*/true);
-  else feedAll(*b, p);
+  if (incremental)
+    tools::runOnline(*b, p, /*quiet=*/true);
+  else
+    feedAll(*b, p);
   return b;
 }
 
@@ -103,11 +104,10 @@ struct Case {
 };
 
 std::string caseName(const Case& c) {
-  std::string n = c.variant + "_" + c.dataset.substr(0, c.dataset.find('.')) +
-                  (c.dataset.find(':') != std::string::npos ? c.dataset.substr(c.dataset.find(':') + 1)
-                                                            : "") +
-                  "_" +
-                  tools::outlierModeName(c.mode) + std::to_string(c.count);
+  std::string n =
+      c.variant + "_" + c.dataset.substr(0, c.dataset.find('.')) +
+      (c.dataset.find(':') != std::string::npos ? c.dataset.substr(c.dataset.find(':') + 1) : "") +
+      "_" + tools::outlierModeName(c.mode) + std::to_string(c.count);
   for (char& ch : n)
     if (!isalnum(static_cast<unsigned char>(ch))) ch = '_';
   return n;
@@ -126,11 +126,12 @@ TEST_P(RobustVariants, RejectsOutliersAndReachesTheOptimum) {
   const tools::OutlierResult data = tools::addOutliers(ref.dataset, o);
   const RunResult r = run(c.variant, data);
   const double rel = (r.inlierChi2 - ref.optimumChi2) / ref.optimumChi2;
-  std::printf("[robust] %-8s %-16s %-7s %3d  recall %.3f precision %.3f rejected %3d  "
-              "chi2(true) %.6g vs %.6g (%+.4f%%)  %.2f s\n",
-              c.variant.c_str(), c.dataset.c_str(), tools::outlierModeName(c.mode), c.count,
-              r.scores.recall, r.scores.precision, r.rejected, r.inlierChi2, ref.optimumChi2,
-              100 * rel, r.seconds);
+  std::printf(
+      "[robust] %-8s %-16s %-7s %3d  recall %.3f precision %.3f rejected %3d  "
+      "chi2(true) %.6g vs %.6g (%+.4f%%)  %.2f s\n",
+      c.variant.c_str(), c.dataset.c_str(), tools::outlierModeName(c.mode), c.count,
+      r.scores.recall, r.scores.precision, r.rejected, r.inlierChi2, ref.optimumChi2, 100 * rel,
+      r.seconds);
   EXPECT_GE(r.scores.recall, c.minRecall);
   EXPECT_GE(r.scores.precision, c.minPrecision);
   EXPECT_LE(std::abs(rel), c.chi2Tolerance);
@@ -151,25 +152,35 @@ std::vector<Case> cases() {
   const auto R = OutlierMode::Random, L = OutlierMode::Local, G = OutlierMode::Group;
   return {
       // zero outliers: nothing rejected, the plain optimum
-      {"gnc-tls", intel, R, 0, 1, 1, 0.01}, {"gnc-gm", intel, R, 0, 1, 1, 0.01},
-      {"risam", intel, R, 0, 1, 1, 0.01},   {"dcs", intel, R, 0, 1, 1, 0.01},
-      {"sc", intel, R, 0, 1, 1, 0.01},      {"mm", intel, R, 0, 1, 1, 0.01},
-      {"huber", intel, R, 0, 1, 1, 0.01},   {"cauchy", intel, R, 0, 1, 1, 0.01},
+      {"gnc-tls", intel, R, 0, 1, 1, 0.01},
+      {"gnc-gm", intel, R, 0, 1, 1, 0.01},
+      {"risam", intel, R, 0, 1, 1, 0.01},
+      {"dcs", intel, R, 0, 1, 1, 0.01},
+      {"sc", intel, R, 0, 1, 1, 0.01},
+      {"mm", intel, R, 0, 1, 1, 0.01},
+      {"huber", intel, R, 0, 1, 1, 0.01},
+      {"cauchy", intel, R, 0, 1, 1, 0.01},
       {"gm", intel, R, 0, 1, 1, 0.01},
       // 30 random / local / grouped outliers
-      {"gnc-tls", intel, R, 30, 0.95, 0.95, 0.01}, {"gnc-tls", intel, L, 30, 0.95, 0.95, 0.01},
+      {"gnc-tls", intel, R, 30, 0.95, 0.95, 0.01},
+      {"gnc-tls", intel, L, 30, 0.95, 0.95, 0.01},
       {"gnc-tls", intel, G, 30, 0.95, 0.95, 0.01},
-      {"gnc-gm", intel, R, 30, 0.85, 0.95, kNone},  {"gnc-gm", intel, L, 30, 0.95, 0.95, kNone},
+      {"gnc-gm", intel, R, 30, 0.85, 0.95, kNone},
+      {"gnc-gm", intel, L, 30, 0.95, 0.95, kNone},
       {"gnc-gm", intel, G, 30, 0.95, 0.95, kNone},
-      {"risam", intel, R, 30, 0.95, 0.95, 0.01},   {"risam", intel, L, 30, 0.95, 0.95, 0.01},
+      {"risam", intel, R, 30, 0.95, 0.95, 0.01},
+      {"risam", intel, L, 30, 0.95, 0.95, 0.01},
       // riSAM: one group of 5 gets in (it bends the map in the convex phase); the optimum over
       // its decisions is taken at optimize(), so nothing true is rejected.
       {"risam", intel, G, 30, 0.8, 0.95, kNone},
-      {"dcs", intel, R, 30, 0.95, 0.95, 0.01},     {"dcs", intel, L, 30, 0.95, 0.95, 0.01},
+      {"dcs", intel, R, 30, 0.95, 0.95, 0.01},
+      {"dcs", intel, L, 30, 0.95, 0.95, 0.01},
       {"dcs", intel, G, 30, 0.95, 0.95, 0.01},
-      {"sc", intel, R, 30, 0.95, 0.95, 0.01},      {"sc", intel, L, 30, 0.95, 0.95, 0.01},
+      {"sc", intel, R, 30, 0.95, 0.95, 0.01},
+      {"sc", intel, L, 30, 0.95, 0.95, 0.01},
       {"sc", intel, G, 30, 0.95, 0.95, 0.01},
-      {"mm", intel, R, 30, 0.95, 0.95, 0.01},      {"mm", intel, L, 30, 0.95, 0.95, kNone},
+      {"mm", intel, R, 30, 0.95, 0.95, 0.01},
+      {"mm", intel, L, 30, 0.95, 0.95, kNone},
       {"mm", intel, G, 30, 0.95, 0.95, 0.01},
       // the whole of intel, random outliers, for the variants that handle them
       {"gnc-tls", "intel.g2o", R, 30, 0.95, 0.95, 0.01},
@@ -181,9 +192,12 @@ std::vector<Case> cases() {
       {"risam", "manhattan.g2o:1500", R, 0, 1, 1, 0.01},
       {"risam", "manhattan.g2o:1500", R, 50, 1, 1, 0.01},
       // 3D
-      {"gnc-tls", grid, R, 20, 0.95, 0.85, 0.10}, {"gnc-gm", grid, R, 20, 0.95, 0.35, 0.06},
-      {"risam", grid, R, 20, 0.95, 0.6, 0.2},     {"mm", grid, R, 20, 0.95, 0.95, 0.05},
-      {"dcs", grid, R, 20, 0.95, 0.0, kNone},     {"sc", grid, R, 20, 0.95, 0.0, kNone},
+      {"gnc-tls", grid, R, 20, 0.95, 0.85, 0.10},
+      {"gnc-gm", grid, R, 20, 0.95, 0.35, 0.06},
+      {"risam", grid, R, 20, 0.95, 0.6, 0.2},
+      {"mm", grid, R, 20, 0.95, 0.95, 0.05},
+      {"dcs", grid, R, 20, 0.95, 0.0, kNone},
+      {"sc", grid, R, 20, 0.95, 0.0, kNone},
   };
 }
 
@@ -198,11 +212,11 @@ TEST(TailGate, MedianAndTailOfNormalizedChi2) {
   for (int i = 0; i < 900; ++i) q.push_back(1.0 * i / 900);
   for (int i = 0; i < 100; ++i) q.push_back(1.0 + 0.1 * i);
   const TailGate t = tailGate(q, 3.0, 1e9);
-  EXPECT_NEAR(t.scale, 500.0 / 900, 1e-9);                 // q[500]
-  const double q90 = 1.0, q99 = 1.0 + 0.1 * 90;            // q[900], q[990]
+  EXPECT_NEAR(t.scale, 500.0 / 900, 1e-9);       // q[500]
+  const double q90 = 1.0, q99 = 1.0 + 0.1 * 90;  // q[900], q[990]
   EXPECT_NEAR(t.gate, q99 * std::pow(q99 / q90, 3.0), 1e-9);
   EXPECT_NEAR(tailGate(q, 3.0, 10.0).gate, 10.0 * t.scale, 1e-9);  // capped by the median
-  EXPECT_EQ(tailGate({1, 2, 3}, 3.0, 100.0).gate, 0.0);     // too few values
+  EXPECT_EQ(tailGate({1, 2, 3}, 3.0, 100.0).gate, 0.0);            // too few values
 }
 
 // manhattan's loop closures are heavy-tailed (largest true χ² 31× the median, above
@@ -226,11 +240,11 @@ TEST(NoiseAwareGnc, KeepsManhattansHeavyTailedTrueClosures) {
       GncBackend b(BackendOptions{}, g);
       feedAll(b, p);
       RunResult r = score(b, p, data);
-      std::printf("[robust] gnc-tls manhattan:1500 %s %d, tail exponent %g: recall %.3f "
-                  "precision %.3f chi2(true) %.6g vs %.6g (%s)\n",
-                  tools::outlierModeName(mode), o.count, tailExponent, r.scores.recall,
-                  r.scores.precision, r.inlierChi2, ref.optimumChi2,
-                  b.summary().stopReason.c_str());
+      std::printf(
+          "[robust] gnc-tls manhattan:1500 %s %d, tail exponent %g: recall %.3f "
+          "precision %.3f chi2(true) %.6g vs %.6g (%s)\n",
+          tools::outlierModeName(mode), o.count, tailExponent, r.scores.recall, r.scores.precision,
+          r.inlierChi2, ref.optimumChi2, b.summary().stopReason.c_str());
       return r;
     };
     const RunResult plain = solveWith(-1.0);  // noise-aware gate off
@@ -265,10 +279,11 @@ TEST(GncOdometryStart, EscapesTheMinimumGroupsBendTheStartInto) {
     GncBackend b(BackendOptions{}, g);
     feedAll(b, p);
     RunResult r = score(b, p, data);
-    std::printf("[robust] gnc-tls intel group 100, odometry start %d: recall %.3f precision %.3f "
-                "chi2(true) %.6g vs %.6g (%s)\n",
-                odometryStart, r.scores.recall, r.scores.precision, r.inlierChi2, ref.optimumChi2,
-                b.summary().stopReason.c_str());
+    std::printf(
+        "[robust] gnc-tls intel group 100, odometry start %d: recall %.3f precision %.3f "
+        "chi2(true) %.6g vs %.6g (%s)\n",
+        odometryStart, r.scores.recall, r.scores.precision, r.inlierChi2, ref.optimumChi2,
+        b.summary().stopReason.c_str());
     return r;
   };
   const RunResult lsOnly = solveWith(false);
@@ -300,10 +315,11 @@ TEST(GncConsistentStart, EscapesWhereConsistentGroupsBendEveryStart) {
     GncBackend b(BackendOptions{}, g);
     feedAll(b, p);
     RunResult r = score(b, p, data);
-    std::printf("[robust] gnc-tls intel group 1000, consistent start %d: recall %.3f precision "
-                "%.3f chi2(true) %.6g vs %.6g (%s)\n",
-                consistentStart, r.scores.recall, r.scores.precision, r.inlierChi2,
-                ref.optimumChi2, b.summary().stopReason.c_str());
+    std::printf(
+        "[robust] gnc-tls intel group 1000, consistent start %d: recall %.3f precision "
+        "%.3f chi2(true) %.6g vs %.6g (%s)\n",
+        consistentStart, r.scores.recall, r.scores.precision, r.inlierChi2, ref.optimumChi2,
+        b.summary().stopReason.c_str());
     return r;
   };
   const RunResult without = solveWith(false);
