@@ -24,12 +24,14 @@ std::unique_ptr<Backend> batch(OptimizerMethod m, BackendOptions o) {
 }
 
 // Robust decorators run over the incremental iSAM2 backend (the batch LM one if a build has
-// no "isam2" entry), checking relinearization at every update as riSAM forces it: robust
-// weights and switch/mixture choices only refresh when a factor is relinearized.
-std::unique_ptr<Backend> robustInner(const BackendOptions& o) {
+// no "isam2" entry). The kernel/switch/mixture decorators check relinearization at every
+// update (relinearizeSkip 1): their weights and choices only refresh when a factor is
+// relinearized. riSAM keeps iSAM2's own skip and forces relinearization on its graduation
+// steps only (RisamOptions::relinearizeGraduation).
+std::unique_ptr<Backend> robustInner(const BackendOptions& o, int relinearizeSkip = 1) {
   if (isBackendName("isam2")) {
     Isam2Options isam;
-    isam.relinearizeSkip = 1;
+    isam.relinearizeSkip = relinearizeSkip;
     return std::make_unique<Isam2Backend>(o, isam);
   }
   return batch(OptimizerMethod::LevenbergMarquardt, o);
@@ -60,15 +62,18 @@ const std::vector<Entry>& registry() {
        [](const BackendOptions& o) { return batch(OptimizerMethod::Dogleg, o); }},
       {{"isam2", "incremental Bayes tree (iSAM2): fluid relinearization, wildfire updates", true},
        [](const BackendOptions& o) { return std::make_unique<Isam2Backend>(o); }},
-      {{"huber", "Huber kernel (IRLS) on loop closures, over isam2; k = sqrt(chi2_dim(0.95))", true},
+      {{"huber", "Huber kernel (IRLS) on loop closures, over isam2; k = sqrt(chi2_dim(0.95))",
+        true},
        [](const BackendOptions& o) {
          return decorated("huber", RobustMethod::Kernel, KernelType::Huber, o);
        }},
-      {{"cauchy", "Cauchy kernel (IRLS) on loop closures, over isam2; k = sqrt(chi2_dim(0.95))", true},
+      {{"cauchy", "Cauchy kernel (IRLS) on loop closures, over isam2; k = sqrt(chi2_dim(0.95))",
+        true},
        [](const BackendOptions& o) {
          return decorated("cauchy", RobustMethod::Kernel, KernelType::Cauchy, o);
        }},
-      {{"gm", "Geman-McClure kernel (IRLS) on loop closures, over isam2; k = sqrt(chi2_dim(0.95))", true},
+      {{"gm", "Geman-McClure kernel (IRLS) on loop closures, over isam2; k = sqrt(chi2_dim(0.95))",
+        true},
        [](const BackendOptions& o) {
          return decorated("gm", RobustMethod::Kernel, KernelType::GemanMcClure, o);
        }},
@@ -76,7 +81,8 @@ const std::vector<Entry>& registry() {
        [](const BackendOptions& o) {
          return decorated("dcs", RobustMethod::Kernel, KernelType::DCS, o);
        }},
-      {{"sc", "switchable constraints (Suenderhauf 2012) over isam2; switch prior 1, sigma 1", true},
+      {{"sc", "switchable constraints (Suenderhauf 2012) over isam2; switch prior 1, sigma 1",
+        true},
        [](const BackendOptions& o) {
          return decorated("sc", RobustMethod::Switchable, KernelType::DCS, o);
        }},
@@ -84,15 +90,21 @@ const std::vector<Entry>& registry() {
        [](const BackendOptions& o) {
          return decorated("mm", RobustMethod::MaxMixture, KernelType::DCS, o);
        }},
-      {{"gnc-gm", "batch GNC, Geman-McClure (Yang 2020); cbar^2 = chi2_dim(0.99), noise-aware gate", false},
+      {{"gnc-gm", "batch GNC, Geman-McClure (Yang 2020); cbar^2 = chi2_dim(0.99), noise-aware gate",
+        false},
        [](const BackendOptions& o) { return gnc(GncLoss::GemanMcClure, o); }},
-      {{"gnc-tls", "batch GNC, truncated least squares (Yang 2020); cbar^2 = chi2_dim(0.99), noise-aware gate", false},
+      {{"gnc-tls",
+        "batch GNC, truncated least squares (Yang 2020); cbar^2 = chi2_dim(0.99), noise-aware gate",
+        false},
        [](const BackendOptions& o) { return gnc(GncLoss::TruncatedLeastSquares, o); }},
-      {{"risam", "incremental GNC in the riSAM manner (SIG kernel, c = sqrt(chi2_dim(0.95)), noise-aware test) over isam2", true},
+      {{"risam",
+        "incremental GNC in the riSAM manner (SIG kernel, c = sqrt(chi2_dim(0.95)), noise-aware "
+        "test) over isam2",
+        true},
        [](const BackendOptions& o) {
          RisamOptions r;
          if (o.robustParameter > 0.0) r.shape = o.robustParameter;
-         return std::make_unique<RisamBackend>(robustInner(o), r);
+         return std::make_unique<RisamBackend>(robustInner(o, Isam2Options{}.relinearizeSkip), r);
        }},
       {{"mh", "multi-hypothesis iSAM2 (MH-iSAM2 manner) for ambiguous measurements; K = 10", true},
        [](const BackendOptions& o) { return std::make_unique<MhBackend>(o, MhOptions{}); }},

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <unordered_map>
 
 #include "robust/pairwise_consistency.h"
@@ -288,6 +289,43 @@ void GncBackend::optimize() {
       bestName = name;
     }
   };
+  // A tightened (or shrunk) gate is usually the median cap (medianFactor × the median): it
+  // gets the solution out of bent minima, but true closures' tail can reach beyond it
+  // (parking-garage: the largest 208× the median). Once the solution has settled, decide once
+  // more against the accepted closures' own tail extrapolation q99·(q99/q90)^tailExponent (no
+  // median cap), at most `cap` and at most c̄²/widenFactor (still a tightened gate): rejected
+  // closures consistent with the solution come back.
+  auto readmitAtTail = [&](double cap) {
+    std::vector<double> q;
+    for (int i = 0; i < n; ++i)
+      if (cbar[i] > 0.0 && weights_[i] >= 0.5)
+        q.push_back(r2[i] / chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5));
+    const TailGate t = tailGate(q, gnc_.tailExponent, 1e300);
+    const double g = std::min(t.gate, cap);
+    bool wider = false;
+    std::vector<double> next = gate;
+    for (int i = 0; i < n; ++i)
+      if (cbar[i] > 0.0) {
+        next[i] = std::min(g * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5),
+                           cbar[i] / gnc_.widenFactor);
+        if (next[i] > gate[i]) wider = true;
+      }
+    if (wider) {
+      gate = next;
+      c2 = gate;
+      int before = 0;
+      for (int i = 0; i < n; ++i) before += cbar[i] > 0.0 && weights_[i] < 0.5;
+      refine(refineCap);
+      int after = 0;
+      for (int i = 0; i < n; ++i) after += cbar[i] > 0.0 && weights_[i] < 0.5;
+      char buf[128];
+      std::snprintf(buf, sizeof buf,
+                    "; re-check at the tail gate %.3g x chi2_dim(0.5): %d -> %d rejected", g,
+                    before, after);
+      log += buf;
+      tailGate_ = g;
+    }
+  };
   const bool odometryCandidate =
       odometryStart.size() == estimate_.size() && odometryStart.size() > 0;
   if (gated || odometryCandidate) {
@@ -360,44 +398,8 @@ void GncBackend::optimize() {
     bool tightened = gated;
     for (int i = 0; i < n && tightened; ++i)
       if (cbar[i] > 0.0) tightened = gate[i] < cbar[i];
-    if ((rounds > 0 || tightened) && gnc_.readmit) {
-      // A tightened (or shrunk) gate is usually the median cap (medianFactor × the median): it
-      // gets the solution out of bent minima, but true closures' tail can reach beyond it
-      // (parking-garage: the largest 208× the median). Now that the solution has settled,
-      // decide once more against the accepted closures' own tail extrapolation
-      // q99·(q99/q90)^tailExponent (no median cap), at most the first gate after gate rounds
-      // and at most c̄²/widenFactor (still a tightened gate): rejected closures consistent
-      // with the solution come back.
-      std::vector<double> q;
-      for (int i = 0; i < n; ++i)
-        if (cbar[i] > 0.0 && weights_[i] >= 0.5)
-          q.push_back(r2[i] / chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5));
-      const TailGate t = tailGate(q, gnc_.tailExponent, 1e300);
-      const double g = rounds > 0 ? std::min(t.gate, firstGate) : t.gate;
-      bool wider = false;
-      std::vector<double> next = gate;
-      for (int i = 0; i < n; ++i)
-        if (cbar[i] > 0.0) {
-          next[i] = std::min(g * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5),
-                             cbar[i] / gnc_.widenFactor);
-          if (next[i] > gate[i]) wider = true;
-        }
-      if (wider) {
-        gate = next;
-        c2 = gate;
-        int before = 0;
-        for (int i = 0; i < n; ++i) before += cbar[i] > 0.0 && weights_[i] < 0.5;
-        refine(refineCap);
-        int after = 0;
-        for (int i = 0; i < n; ++i) after += cbar[i] > 0.0 && weights_[i] < 0.5;
-        char buf[128];
-        std::snprintf(buf, sizeof buf,
-                      "; re-check at the tail gate %.3g x chi2_dim(0.5): %d -> %d rejected", g,
-                      before, after);
-        log += buf;
-        tailGate_ = g;
-      }
-    }
+    if ((rounds > 0 || tightened) && gnc_.readmit)
+      readmitAtTail(rounds > 0 ? firstGate : std::numeric_limits<double>::infinity());
   }
   if (odometryCandidate && gnc_.consistentStart) {
     // Consistent groups of wrong closures can bend the map from both starts (intel, 1000 in
@@ -423,7 +425,7 @@ void GncBackend::optimize() {
       pcm.closureScale = median(qClosures, 1.0);
       const ConsistentSet set = pairwiseConsistentClosures(graph_, odometryStart, pcm);
       const Values consistentStart = set.size > 0 ? trustedLinearStart(set.member) : Values();
-      char buf[200];
+      char buf[256];
       if (consistentStart.size() == estimate_.size()) {
         const double before = tlsCost();
         const Values keptEstimate = estimate_;
@@ -438,6 +440,16 @@ void GncBackend::optimize() {
         std::vector<double> candidateGate = gate;
         const double usedScale = scale_, usedGate = tailGate_;
         const bool ownGate = noiseAware && estimateGate(candidateGate);
+        // The set is a selection of the best-fitting closures, so its tail understates the
+        // true closures' (intel: q99·(q99/q90)³ at 0.04 of χ²_dim(0.5) with the median at
+        // 0.003): a tightened gate is not taken below medianFactor × the median.
+        if (ownGate)
+          for (int i = 0; i < n; ++i)
+            if (cbar[i] > 0.0 && candidateGate[i] < cbar[i])
+              candidateGate[i] = std::max(
+                  candidateGate[i], std::min(cbar[i] / gnc_.widenFactor,
+                                             gnc_.medianFactor * scale_ *
+                                                 chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5)));
         const double candidateScale = scale_, candidateTail = tailGate_;
         scale_ = usedScale, tailGate_ = usedGate;
         const std::vector<double> keptGate = gate;
@@ -446,9 +458,13 @@ void GncBackend::optimize() {
         gate = keptGate;  // both judged by the same truncated cost
         const double after = tlsCost();
         const bool keep = after < before;
+        bool tightenedHere = false;
         if (keep && ownGate) {
           gate = candidateGate;
           scale_ = candidateScale, tailGate_ = candidateTail;
+          tightenedHere = true;
+          for (int i = 0; i < n && tightenedHere; ++i)
+            if (cbar[i] > 0.0) tightenedHere = gate[i] < cbar[i];
         }
         if (!keep) {
           estimate_.assignFrom(keptEstimate);
@@ -457,10 +473,13 @@ void GncBackend::optimize() {
           last = keptLast;
         }
         std::snprintf(buf, sizeof buf,
-                      "; from the consistent set (%d of %d closures; scales %.3g, %.3g): %s "
-                      "(truncated cost %.6g vs %.6g)",
-                      set.size, set.judged, pcm.odometryScale, pcm.closureScale,
-                      keep ? "kept" : "dropped", after, before);
+                      "; from the consistent set (%d of %d closures; scales %.3g, %.3g, "
+                      "calibrated x%.3g on %d short cycles): %s (truncated cost %.6g vs %.6g)",
+                      set.size, set.judged, pcm.odometryScale, pcm.closureScale, set.calibration,
+                      set.calibrationPairs, keep ? "kept" : "dropped", after, before);
+        log += buf;
+        buf[0] = '\0';
+        if (tightenedHere && gnc_.readmit) readmitAtTail(std::numeric_limits<double>::infinity());
       } else {
         std::snprintf(buf, sizeof buf, "; consistent set: %d of %d closures, no start", set.size,
                       set.judged);
@@ -483,98 +502,104 @@ void GncBackend::optimize() {
     // Those with Δ < gate_i would lower the truncated cost: accept them all, re-solve, refine
     // against the gate, and keep the result if the truncated cost did drop (a stiff true
     // closure left out of a locally misfit map: manhattan with 1000 outliers).
-    c2 = gate;
-    std::vector<int> cand;
-    for (int i = 0; i < n; ++i)
-      if (cbar[i] > 0.0 && weights_[i] < 0.5) cand.push_back(i);
-    std::vector<int> admit;
-    constexpr size_t kChunk = 64;
-    try {
-      for (size_t first = 0; first < cand.size(); first += kChunk) {
-        const size_t last = std::min(cand.size(), first + kChunk);
-        std::vector<Key> keys;
-        std::unordered_map<Key, int> col;  // key → first column in the joint marginal
-        int cols = 0;
-        for (size_t c = first; c < last; ++c) {
-          const Factor& f = *graph_[cand[c]];
-          for (int k = 0; k < f.size(); ++k)
-            if (col.emplace(f.key(k), cols).second) {
-              keys.push_back(f.key(k));
-              cols += varDim(f.varType(k));
+    // In rounds: admitting some can make others fit (a subset-start map settling).
+    for (int round = 0; round < gnc_.recheckRounds; ++round) {
+      bool kept = false;
+      c2 = gate;
+      std::vector<int> cand;
+      for (int i = 0; i < n; ++i)
+        if (cbar[i] > 0.0 && weights_[i] < 0.5) cand.push_back(i);
+      std::vector<int> admit;
+      constexpr size_t kChunk = 64;
+      try {
+        for (size_t first = 0; first < cand.size(); first += kChunk) {
+          const size_t last = std::min(cand.size(), first + kChunk);
+          std::vector<Key> keys;
+          std::unordered_map<Key, int> col;  // key → first column in the joint marginal
+          int cols = 0;
+          for (size_t c = first; c < last; ++c) {
+            const Factor& f = *graph_[cand[c]];
+            for (int k = 0; k < f.size(); ++k)
+              if (col.emplace(f.key(k), cols).second) {
+                keys.push_back(f.key(k));
+                cols += varDim(f.varType(k));
+              }
+          }
+          const Eigen::MatrixXd sigma = marginalCovariance(keys);
+          if (sigma.rows() != cols) break;
+          for (size_t c = first; c < last; ++c) {
+            const Factor& f = *graph_[cand[c]];
+            std::array<const double*, kMaxFactorKeys> xp{};
+            std::array<JacobianBlock, kMaxFactorKeys> jb{};
+            std::array<double*, kMaxFactorKeys> jp{};
+            std::vector<int> at;
+            int fc = 0;
+            bool ok = true;
+            for (int k = 0; k < f.size(); ++k) {
+              const int slot = estimate_.slot(f.key(k));
+              if (slot < 0)
+                ok = false;
+              else
+                xp[k] = estimate_.data(slot);
+              jp[k] = jb[k].data();
+              fc += varDim(f.varType(k));
             }
-        }
-        const Eigen::MatrixXd sigma = marginalCovariance(keys);
-        if (sigma.rows() != cols) break;
-        for (size_t c = first; c < last; ++c) {
-          const Factor& f = *graph_[cand[c]];
-          std::array<const double*, kMaxFactorKeys> xp{};
-          std::array<JacobianBlock, kMaxFactorKeys> jb{};
-          std::array<double*, kMaxFactorKeys> jp{};
-          std::vector<int> at;
-          int fc = 0;
-          bool ok = true;
-          for (int k = 0; k < f.size(); ++k) {
-            const int slot = estimate_.slot(f.key(k));
-            if (slot < 0)
-              ok = false;
-            else
-              xp[k] = estimate_.data(slot);
-            jp[k] = jb[k].data();
-            fc += varDim(f.varType(k));
+            if (!ok) continue;
+            const int d = f.dim();
+            Eigen::VectorXd r(d);
+            f.evaluate(xp.data(), r.data(), jp.data());
+            Eigen::MatrixXd J(d, fc), S(fc, fc);
+            std::vector<int> off(f.size()), len(f.size());
+            for (int k = 0, c0 = 0; k < f.size(); c0 += varDim(f.varType(k)), ++k) {
+              off[k] = c0;
+              len[k] = varDim(f.varType(k));
+              J.middleCols(c0, len[k]) = Eigen::Map<const Eigen::MatrixXd>(jb[k].data(), d, len[k]);
+            }
+            for (int a = 0; a < f.size(); ++a)
+              for (int b = 0; b < f.size(); ++b)
+                S.block(off[a], off[b], len[a], len[b]) =
+                    sigma.block(col[f.key(a)], col[f.key(b)], len[a], len[b]);
+            const Eigen::MatrixXd cov = Eigen::MatrixXd::Identity(d, d) + J * S * J.transpose();
+            Eigen::LDLT<Eigen::MatrixXd> ldlt(cov);
+            if (ldlt.info() != Eigen::Success) continue;
+            if (r.dot(ldlt.solve(r)) < gate[cand[c]]) admit.push_back(cand[c]);
           }
-          if (!ok) continue;
-          const int d = f.dim();
-          Eigen::VectorXd r(d);
-          f.evaluate(xp.data(), r.data(), jp.data());
-          Eigen::MatrixXd J(d, fc), S(fc, fc);
-          std::vector<int> off(f.size()), len(f.size());
-          for (int k = 0, c0 = 0; k < f.size(); c0 += varDim(f.varType(k)), ++k) {
-            off[k] = c0;
-            len[k] = varDim(f.varType(k));
-            J.middleCols(c0, len[k]) = Eigen::Map<const Eigen::MatrixXd>(jb[k].data(), d, len[k]);
-          }
-          for (int a = 0; a < f.size(); ++a)
-            for (int b = 0; b < f.size(); ++b)
-              S.block(off[a], off[b], len[a], len[b]) =
-                  sigma.block(col[f.key(a)], col[f.key(b)], len[a], len[b]);
-          const Eigen::MatrixXd cov = Eigen::MatrixXd::Identity(d, d) + J * S * J.transpose();
-          Eigen::LDLT<Eigen::MatrixXd> ldlt(cov);
-          if (ldlt.info() != Eigen::Success) continue;
-          if (r.dot(ldlt.solve(r)) < gate[cand[c]]) admit.push_back(cand[c]);
         }
+      } catch (const std::exception&) {
+        admit.clear();
       }
-    } catch (const std::exception&) {
-      admit.clear();
-    }
-    if (!admit.empty()) {
-      const double before = tlsCost();
-      const Values keptEstimate = estimate_;
-      const std::vector<double> keptWeights = weights_, keptR2 = r2;
-      const OptimizerResult keptLast = last;
-      for (int i : admit) weights_[i] = 1.0;
-      ++refine_;
-      last = solveOnce();
-      iterations += last.iterations;
-      residuals();
-      refine(0);
-      const double after = tlsCost();
-      char buf[160];
-      if (after < before) {
-        std::snprintf(buf, sizeof buf,
-                      "; re-check: %zu rejected closures fit the map's uncertainty, kept "
-                      "(truncated cost %.6g -> %.6g)",
-                      admit.size(), before, after);
-      } else {
-        estimate_.assignFrom(keptEstimate);
-        weights_ = keptWeights;
-        r2 = keptR2;
-        last = keptLast;
-        std::snprintf(
-            buf, sizeof buf,
-            "; re-check: %zu rejected closures tried, dropped (truncated cost %.6g vs %.6g)",
-            admit.size(), before, after);
+      if (!admit.empty()) {
+        const double before = tlsCost();
+        const Values keptEstimate = estimate_;
+        const std::vector<double> keptWeights = weights_, keptR2 = r2;
+        const OptimizerResult keptLast = last;
+        for (int i : admit) weights_[i] = 1.0;
+        ++refine_;
+        last = solveOnce();
+        iterations += last.iterations;
+        residuals();
+        refine(0);
+        const double after = tlsCost();
+        char buf[160];
+        kept = after < before;
+        if (kept) {
+          std::snprintf(buf, sizeof buf,
+                        "; re-check: %zu rejected closures fit the map's uncertainty, kept "
+                        "(truncated cost %.6g -> %.6g)",
+                        admit.size(), before, after);
+        } else {
+          estimate_.assignFrom(keptEstimate);
+          weights_ = keptWeights;
+          r2 = keptR2;
+          last = keptLast;
+          std::snprintf(
+              buf, sizeof buf,
+              "; re-check: %zu rejected closures tried, dropped (truncated cost %.6g vs %.6g)",
+              admit.size(), before, after);
+        }
+        log += buf;
       }
-      log += buf;
+      if (!kept) break;
     }
   }
   reason = firstReason + log;

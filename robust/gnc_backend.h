@@ -50,7 +50,7 @@ struct GncOptions {
   bool rerunWithGate = false;
   /// If closures are rejected, also start from the largest pairwise-consistent set of
   /// closures (robust/pairwise_consistency.h) and keep it if its truncated cost is lower
-  /// (needs the odometry start).
+  /// (TLS only: the candidate is decided 0/1; needs the odometry start).
   bool consistentStart = true;
   double consistencyProbability = 0.999;
   /// Noise-aware gate (off when BackendOptions::robustParameter > 0 or tailExponent < 0).
@@ -83,6 +83,7 @@ struct GncOptions {
   /// Finally, re-admit rejected closures whose predicted cost rᵀ(I + JΣJᵀ)⁻¹r (Σ: joint
   /// marginal of their variables) is below their gate, if that lowers the truncated cost.
   bool recheckRejected = true;
+  int recheckRounds = 3;  // while a round's admissions are kept
 };
 
 /// Noise scale and tail gate of normalized χ² values q_i = χ²_i/χ²_{dim_i}(0.5): scale = the

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numeric>
 #include <unordered_map>
 
@@ -175,28 +176,62 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values&
     ++degree[i];
     ++degree[j];
   };
-  for (int i = 0; i < m; ++i) {
+  std::vector<Rigid> inverse(n);
+  for (int k = 0; k < n; ++k) inverse[k] = pose[k].inverse();
+  // The cycle statistic of closures i and j; infinite across chain breaks.
+  auto cycle = [&](int i, int j) {
     const Judged& ci = judged[i];
-    const Rigid xbInverse = pose[ci.b].inverse();  // x_b⁻¹
-    for (int j = i + 1; j < m; ++j) {
-      const Judged& cj = judged[j];
-      if (segment[ci.a] != segment[cj.a] || segment[ci.b] != segment[cj.b]) continue;
-      // Δ = z_j⁻¹·(x_c⁻¹x_a)·z_i·(x_b⁻¹x_d)
-      const Rigid delta =
-          cj.zInverse * (pose[cj.a].inverse() * pose[ci.a]) * ci.z * (xbInverse * pose[cj.b]);
-      const Vec3& pd = pose[cj.b].t;
-      double varT =
-          dimT * (ci.varT + cj.varT) + lever * (ci.varR * (pd - pose[ci.b].t).squaredNorm() +
-                                                cj.varR * (pd - pose[cj.a].t).squaredNorm());
-      double varR = dimR * (ci.varR + cj.varR);
-      chain(cj.a, ci.a, pd, varT, varR);
-      chain(ci.b, cj.b, pd, varT, varR);
-      const double angle = rotationAngle(delta.R);
-      const double mahalanobis = dimT * delta.t.squaredNorm() / std::max(varT, 1e-300) +
-                                 dimR * angle * angle / std::max(varR, 1e-300);
-      if (mahalanobis < gate) connect(i, j);
+    const Judged& cj = judged[j];
+    if (segment[ci.a] != segment[cj.a] || segment[ci.b] != segment[cj.b])
+      return std::numeric_limits<double>::infinity();
+    // Δ = z_j⁻¹·(x_c⁻¹x_a)·z_i·(x_b⁻¹x_d)
+    const Rigid delta =
+        cj.zInverse * (inverse[cj.a] * pose[ci.a]) * ci.z * (inverse[ci.b] * pose[cj.b]);
+    const Vec3& pd = pose[cj.b].t;
+    double varT =
+        dimT * (ci.varT + cj.varT) + lever * (ci.varR * (pd - pose[ci.b].t).squaredNorm() +
+                                              cj.varR * (pd - pose[cj.a].t).squaredNorm());
+    double varR = dimR * (ci.varR + cj.varR);
+    chain(cj.a, ci.a, pd, varT, varR);
+    chain(ci.b, cj.b, pd, varT, varR);
+    const double angle = rotationAngle(delta.R);
+    return dimT * delta.t.squaredNorm() / std::max(varT, 1e-300) +
+           dimR * angle * angle / std::max(varR, 1e-300);
+  };
+
+  // Calibration on short cycles (both chains within calibrationWindow poses): these are
+  // mostly pairs of true closures from one revisit, and their statistic barely depends on
+  // the odometry's drift, so its median against χ²_dim(0.5) is the factor by which the
+  // stated (and scaled) covariances are off.
+  double calibration = 1.0;
+  if (options.calibrationWindow > 0) {
+    std::vector<int> byA(m);
+    std::iota(byA.begin(), byA.end(), 0);
+    std::sort(byA.begin(), byA.end(), [&](int x, int y) { return judged[x].a < judged[y].a; });
+    std::vector<double> shortCycles;
+    for (size_t p = 0; p < byA.size(); ++p)
+      for (size_t q = p + 1; q < byA.size(); ++q) {
+        const Judged& ci = judged[byA[p]];
+        const Judged& cj = judged[byA[q]];
+        if (cj.a - ci.a > options.calibrationWindow) break;
+        if (std::abs(cj.b - ci.b) > options.calibrationWindow) continue;
+        if (cj.a == ci.a && cj.b == ci.b) continue;
+        const double s = cycle(byA[p], byA[q]);
+        if (std::isfinite(s)) shortCycles.push_back(s);
+      }
+    out.calibrationPairs = static_cast<int>(shortCycles.size());
+    if (out.calibrationPairs >= options.minCalibrationPairs) {
+      std::nth_element(shortCycles.begin(), shortCycles.begin() + shortCycles.size() / 2,
+                       shortCycles.end());
+      calibration = std::min(1.0, std::max(shortCycles[shortCycles.size() / 2], 1e-300) /
+                                      chi2Quantile(planar ? 3 : 6, 0.5));
     }
   }
+  out.calibration = calibration;
+  const double threshold = gate * calibration;
+  for (int i = 0; i < m; ++i)
+    for (int j = i + 1; j < m; ++j)
+      if (cycle(i, j) < threshold) connect(i, j);
 
   std::vector<int> order(m);
   std::iota(order.begin(), order.end(), 0);

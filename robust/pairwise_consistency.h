@@ -26,12 +26,18 @@ struct ConsistencyOptions {
   double odometryScale = 1.0;
   double closureScale = 1.0;
   int cliqueSeeds = 8;  // greedy clique searches, each from one of the best-connected closures
+  /// Calibrate the covariances on short cycles: pairs whose two chains are each at most this
+  /// many poses long (0: off); used when there are at least minCalibrationPairs of them.
+  int calibrationWindow = 5;
+  int minCalibrationPairs = 30;
 };
 
 struct ConsistentSet {
   std::vector<char> member;  // per factor of the graph: 1 if in the consistent set
   int judged = 0;            // closures that took part
   int size = 0;              // closures in the set
+  int calibrationPairs = 0;  // short cycles found
+  double calibration = 1.0;  // the factor the covariances were found off by (1: not calibrated)
 };
 
 /// The largest mutually consistent set of the graph's loop closures at `odometry` (the

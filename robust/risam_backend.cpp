@@ -8,6 +8,7 @@
 #include <unordered_set>
 
 #include "robust/gnc_backend.h"
+#include "solvers/incremental/isam2.h"
 
 namespace loopd {
 
@@ -21,8 +22,7 @@ namespace loopd {
 class RisamSigFactor final : public Factor {
  public:
   template <size_t... I>
-  RisamSigFactor(std::index_sequence<I...>, FactorPtr inner, double mu, double c,
-                    const Values* at)
+  RisamSigFactor(std::index_sequence<I...>, FactorPtr inner, double mu, double c, const Values* at)
       : Factor({{inner->key(I), inner->varType(I)}...}, inner->dim(), inner->role()),
         inner_(std::move(inner)),
         mu_(mu),
@@ -89,7 +89,9 @@ FactorPtr makeSig(const FactorPtr& f, double mu, double c, const Values* at, Fac
 }  // namespace
 
 RisamBackend::RisamBackend(std::unique_ptr<Backend> inner, RisamOptions options)
-    : DecoratorBackend(std::move(inner), "RisamBackend"), options_(options) {}
+    : DecoratorBackend(std::move(inner), "RisamBackend"),
+      options_(options),
+      innerIsam2_(dynamic_cast<Isam2Backend*>(inner_.get())) {}
 
 BackendUpdate RisamBackend::regraduate(const std::vector<FactorId>& ids, double mu) {
   BackendUpdate step;
@@ -112,8 +114,9 @@ double RisamBackend::nextMu(double mu) const {
 double RisamBackend::shapeSquared(int dim) const {
   if (options_.shape > 0.0) return options_.shape * options_.shape;
   const double d = chi2Quantile(std::max(dim, 1), 0.95);
-  return gate_ > 0.0 && options_.widenShape ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5))
-                                            : d;
+  return gate_ > 0.0 && options_.widenShape
+             ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5))
+             : d;
 }
 
 double RisamBackend::rejectChi2(int dim) const {
@@ -147,11 +150,20 @@ FactorPtr RisamBackend::wrap(const FactorPtr& f, double mu, FactorId internal) c
   const Values* at = options_.weightAtEstimate ? &inner_->estimate() : nullptr;
   FactorPtr w;
   switch (f->size()) {
-    case 1: w = makeSig<1>(f, mu, c, at, internal); break;
-    case 2: w = makeSig<2>(f, mu, c, at, internal); break;
-    case 3: w = makeSig<3>(f, mu, c, at, internal); break;
-    case 4: w = makeSig<4>(f, mu, c, at, internal); break;
-    default: throw std::invalid_argument("risam: factor with " + std::to_string(f->size()) + " keys");
+    case 1:
+      w = makeSig<1>(f, mu, c, at, internal);
+      break;
+    case 2:
+      w = makeSig<2>(f, mu, c, at, internal);
+      break;
+    case 3:
+      w = makeSig<3>(f, mu, c, at, internal);
+      break;
+    case 4:
+      w = makeSig<4>(f, mu, c, at, internal);
+      break;
+    default:
+      throw std::invalid_argument("risam: factor with " + std::to_string(f->size()) + " keys");
   }
   return w;
 }
@@ -182,9 +194,12 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
         const Key key = f->key(k);
         const int su = u.initial.slot(key);
         const int sx = su < 0 ? x.slot(key) : -1;
-        if (su >= 0) local.insertFrom(u.initial, su);
-        else if (sx >= 0) local.insertFrom(x, sx);
-        else consistent = false;
+        if (su >= 0)
+          local.insertFrom(u.initial, su);
+        else if (sx >= 0)
+          local.insertFrom(x, sx);
+        else
+          consistent = false;
       }
       if (!consistent || !(f->chi2(local) <= options_.consistentFraction * rejectChi2(f->dim())))
         consistent = false;
@@ -280,7 +295,11 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
                 ids.end());
   if (active.empty() || consistent) return result;
 
-  auto step = [&](const BackendUpdate& s) {
+  // One inner update; `graduating`: a step of the schedule (weights about to move), which
+  // relinearizes whatever the inner iSAM2's relinearizeSkip says.
+  auto step = [&](const BackendUpdate& s, bool graduating) {
+    if (graduating && innerIsam2_ && options_.relinearizeGraduation)
+      innerIsam2_->relinearizeNextUpdate();
     const UpdateResult r = inner_->update(s);
     result.seconds += r.seconds;
     result.relinearized += r.relinearized;
@@ -320,7 +339,7 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
         readd.push_back(id);
       }
     }
-    if (!readd.empty()) step(regraduate(readd, 1.0));
+    if (!readd.empty()) step(regraduate(readd, 1.0), false);
   };
   if (absorbedNow(true)) {
     ++absorbedUpdates_;
@@ -330,14 +349,14 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   // Not absorbed: the neighbours join the active set at μ_init (one more convex step), then
   // the schedule, cut short once everything is absorbed.
   if (!neighbours.empty()) {
-    step(regraduate(neighbours, options_.muInit));
+    step(regraduate(neighbours, options_.muInit), true);
     activeIds.insert(activeIds.end(), neighbours.begin(), neighbours.end());
   }
   double mu = options_.muInit;
   int extra = options_.extraIterations;
   while (mu < 1.0 || extra-- > 0) {
     mu = nextMu(mu);
-    step(regraduate(activeIds, mu));
+    step(regraduate(activeIds, mu), true);
     if (mu < 1.0 && absorbedNow(false)) {
       promote();
       break;
@@ -412,8 +431,8 @@ void RisamBackend::decideAndSolve(const std::vector<FactorId>* include) {
     const Values& x = inner_->estimate();
     BackendUpdate step;
     for (auto& [id, g] : graduated_) {
-      const bool accept = (round == 0 && forced.count(id)) ||
-                          g.original->chi2(x) <= rejectChi2(g.original->dim());
+      const bool accept =
+          (round == 0 && forced.count(id)) || g.original->chi2(x) <= rejectChi2(g.original->dim());
       const double w = accept ? 1.0 : 0.0;
       if (g.decided && g.mu == w) continue;
       setDecided(g, w, step);
@@ -515,10 +534,9 @@ std::vector<std::pair<FactorId, double>> RisamBackend::decisions() const {
   for (const auto& f : originals_.factors()) {
     auto it = graduated_.find(f->id());
     if (it != graduated_.end())
-      out.emplace_back(f->id(), it->second.decided
-                                    ? it->second.mu
-                                    : sigWeight(f->chi2(x), it->second.mu,
-                                                std::sqrt(shapeSquared(f->dim()))));
+      out.emplace_back(f->id(), it->second.decided ? it->second.mu
+                                                   : sigWeight(f->chi2(x), it->second.mu,
+                                                               std::sqrt(shapeSquared(f->dim()))));
   }
   return out;
 }
@@ -527,9 +545,7 @@ std::vector<FactorId> RisamBackend::rejected() const {
   std::vector<FactorId> out;
   const Values& x = inner_->estimate();
   for (const auto& f : originals_.factors())
-    if (graduated_.count(f->id()) &&
-        !(f->chi2(x) <= rejectChi2(f->dim())))
-      out.push_back(f->id());
+    if (graduated_.count(f->id()) && !(f->chi2(x) <= rejectChi2(f->dim()))) out.push_back(f->id());
   return out;
 }
 

@@ -99,8 +99,8 @@ void Isam2Backend::manageGauge() {
     const int v = firstPose_;
     FactorPtr prior;
     if (estimate_.type(v) == VarType::SE2)
-      prior = std::make_shared<PriorFactorSE2>(estimate_.key(v), estimate_.se2(v),
-                                               isam_.gaugeInformation * Eigen::Matrix3d::Identity());
+      prior = std::make_shared<PriorFactorSE2>(
+          estimate_.key(v), estimate_.se2(v), isam_.gaugeInformation * Eigen::Matrix3d::Identity());
     else
       prior = std::make_shared<PriorFactorSE3>(estimate_.key(v), estimate_.se3(v),
                                                isam_.gaugeInformation * Mat6::Identity());
@@ -242,7 +242,8 @@ UpdateResult Isam2Backend::update(const BackendUpdate& u) {
     }
   }
   manageGauge();
-  if (updateCount_ % isam_.relinearizeSkip == 0) relinearize(false);
+  if (relinearizeNext_ || updateCount_ % isam_.relinearizeSkip == 0) relinearize(false);
+  relinearizeNext_ = false;
   result.relinearized = stats_.relinearized;
 
   recompute();
@@ -327,12 +328,14 @@ void Isam2Backend::recompute() {
     rowCol.reserve(static_cast<size_t>(nrow) * 3);
     for (int r = 0; r < static_cast<int>(topFactors.size()); ++r) {
       const int f = topFactors[r];
-      for (int k = 0; k < factors_[f]->size(); ++k) rowCol.push_back(scratchPos_[factorVars_[f][k]]);
+      for (int k = 0; k < factors_[f]->size(); ++k)
+        rowCol.push_back(scratchPos_[factorVars_[f][k]]);
       rowPtr[r + 1] = static_cast<int>(rowCol.size());
     }
     for (size_t o = 0; o < orphans.size(); ++o) {
       const Clique& O = cliques_[orphans[o]];
-      for (size_t i = O.numFrontals; i < O.vars.size(); ++i) rowCol.push_back(scratchPos_[O.vars[i]]);
+      for (size_t i = O.numFrontals; i < O.vars.size(); ++i)
+        rowCol.push_back(scratchPos_[O.vars[i]]);
       rowPtr[topFactors.size() + o + 1] = static_cast<int>(rowCol.size());
     }
     const int nnz = static_cast<int>(rowCol.size());
@@ -413,8 +416,10 @@ void Isam2Backend::recompute() {
       allConstrained &= c;
       if (!c) {
         const bool old = updateCount_ - touched_[topVars[i]] > isam_.recencyGrouping;
-        if (old) ++numOld;
-        else anyRecent = true;
+        if (old)
+          ++numOld;
+        else
+          anyRecent = true;
       }
     }
     const bool twoGroups = anyConstrained && !allConstrained;
@@ -425,8 +430,8 @@ void Isam2Backend::recompute() {
     if (ok && isam_.recencyGrouping > 0 && anyRecent && 4 * numOld >= m) {
       std::vector<int> grouped(m, 0), alt;
       for (int i = 0; i < m; ++i)
-        grouped[i] = cmember[i] ? 2
-                                : (updateCount_ - touched_[topVars[i]] > isam_.recencyGrouping ? 0 : 1);
+        grouped[i] =
+            cmember[i] ? 2 : (updateCount_ - touched_[topVars[i]] > isam_.recencyGrouping ? 0 : 1);
       if (!anyConstrained)
         for (int& g : grouped) g = std::min(g, 1);
       if (runCcolamd(grouped.data(), alt) &&
@@ -453,7 +458,8 @@ void Isam2Backend::recompute() {
       for (int k = 0; k < factors_[f]->size(); ++k) h = std::min(h, scratchPos_[factorVars_[f][k]]);
     } else {
       const Clique& O = cliques_[orphans[r - nf]];
-      for (size_t i = O.numFrontals; i < O.vars.size(); ++i) h = std::min(h, scratchPos_[O.vars[i]]);
+      for (size_t i = O.numFrontals; i < O.vars.size(); ++i)
+        h = std::min(h, scratchPos_[O.vars[i]]);
     }
     rowHome[r] = h;
     ++homeStart[h + 1];
@@ -540,8 +546,10 @@ void Isam2Backend::recompute() {
     C.nf = C.offsets[C.numFrontals];
     C.n = C.offsets.back();
     for (int j = 0; j < C.numFrontals; ++j) cliqueOf_[C.vars[j]] = c;
-    if (C.parent >= 0) cliques_[C.parent].children.push_back(c);
-    else newRoots_.push_back(c);
+    if (C.parent >= 0)
+      cliques_[C.parent].children.push_back(c);
+    else
+      newRoots_.push_back(c);
   }
   for (int o : orphans) {
     Clique& O = cliques_[o];
@@ -605,8 +613,8 @@ inline void addJtJFixed(const double* Ja, const double* Jb, double* H, int ld, i
   }
 }
 
-inline void addJtJ(int dim, int da, int db, const double* Ja, const double* Jb, double* H,
-                   int ld, int oa, int ob, bool mirror) {
+inline void addJtJ(int dim, int da, int db, const double* Ja, const double* Jb, double* H, int ld,
+                   int oa, int ob, bool mirror) {
   if (dim == 6 && da == 6 && db == 6) return addJtJFixed<6, 6, 6>(Ja, Jb, H, ld, oa, ob, mirror);
   if (dim == 3 && da == 3 && db == 3) return addJtJFixed<3, 3, 3>(Ja, Jb, H, ld, oa, ob, mirror);
   if (dim == 2 && da == 3 && db == 2) return addJtJFixed<2, 3, 2>(Ja, Jb, H, ld, oa, ob, mirror);
@@ -762,7 +770,8 @@ bool Isam2Backend::factorizeClique(Clique& C) {
   HFF.triangularView<Eigen::Lower>().solveInPlace(bF);
   if (ns > 0) {
     Eigen::Ref<Eigen::MatrixXd> HSF = H.bottomLeftCorner(ns, nf);
-    HFF.transpose().triangularView<Eigen::Upper>().solveInPlace<Eigen::OnTheRight>(HSF);  // H_SF·L_FF⁻ᵀ
+    HFF.transpose().triangularView<Eigen::Upper>().solveInPlace<Eigen::OnTheRight>(
+        HSF);  // H_SF·L_FF⁻ᵀ
     Eigen::Ref<Eigen::MatrixXd> HSS = H.bottomRightCorner(ns, ns);
     HSS.selfadjointView<Eigen::Lower>().rankUpdate(HSF, -1.0);
     Eigen::Map<Eigen::VectorXd> bS(M + static_cast<size_t>(n) * n + nf, ns);
@@ -928,8 +937,8 @@ void Isam2Backend::optimize() {
   summary_.iterations = iterations;
   summary_.finalChi2 = graph_.chi2(estimate_);
   summary_.converged = converged;
-  summary_.stopReason = converged ? (usedBatch ? "converged (after batch LM)" : "converged")
-                                  : "iteration limit";
+  summary_.stopReason =
+      converged ? (usedBatch ? "converged (after batch LM)" : "converged") : "iteration limit";
 }
 
 }  // namespace loopd

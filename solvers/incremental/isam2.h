@@ -22,21 +22,21 @@ namespace loopd {
 
 struct Isam2Options {
   double relinearizeThreshold = 0.1;  // β: max |Δ| component (rad or m) before relinearizing
-  int relinearizeSkip = 10;           // check for relinearization every k-th update (GTSAM's default)
-  double wildfireThreshold = 0.001;   // α: descend into a subtree if a separator Δ moved more
+  int relinearizeSkip = 10;  // check for relinearization every k-th update (GTSAM's default)
+  double wildfireThreshold = 0.001;  // α: descend into a subtree if a separator Δ moved more
   // Ordering of the top: variables that no new factor touched for this many updates are
   // eliminated first (0: off), if that costs at most recencyFillTolerance × the fill of the
   // plain order (new factors' variables last). Keeps old variables off the root path.
   long recencyGrouping = 300;
   double recencyFillTolerance = 1.2;
-  double gaugeInformation = 1e8;      // internal prior on the first pose when no prior exists
-  int maxFinalIterations = 30;        // optimize(): full relinearizations at most
+  double gaugeInformation = 1e8;          // internal prior on the first pose when no prior exists
+  int maxFinalIterations = 30;            // optimize(): full relinearizations at most
   double finalRelativeTolerance = 1e-10;  // optimize(): stop when chi2 improves less
 };
 
 /// Counters of the last update (for benches and tests).
 struct Isam2UpdateStats {
-  int topCliques = 0;     // cliques re-eliminated
+  int topCliques = 0;  // cliques re-eliminated
   int topVariables = 0;
   int orphans = 0;
   int solvedCliques = 0;  // back-substitution visits
@@ -50,6 +50,9 @@ class Isam2Backend : public Backend {
   std::string name() const override { return "isam2"; }
   UpdateResult update(const BackendUpdate& update) override;
   void optimize() override;
+  /// The next update checks for relinearization whatever relinearizeSkip says (a caller
+  /// about to change factors' weights in steps: riSAM's graduation).
+  void relinearizeNextUpdate() { relinearizeNext_ = true; }
   const Values& estimate() const override { return estimate_; }
   const FactorGraph& graph() const override { return graph_; }
   Eigen::MatrixXd marginalCovariance(const std::vector<Key>& keys) override;
@@ -85,7 +88,7 @@ class Isam2Backend : public Backend {
     // block), bottom-left L_SF = H_SF·L_FF⁻ᵀ, bottom-right the separator factor's Hessian
     // (symmetric); vector: d = L_FF⁻¹·b_F, then the separator factor's b.
     // Copies of the backend share both buffers until one of them re-eliminates the clique.
-    SharedBuffer m;  // only the lower triangle of the symmetric parts is kept
+    SharedBuffer m;         // only the lower triangle of the symmetric parts is kept
     SharedBuffer marginal;  // n×n joint covariance of vars (cached per epoch)
     long marginalEpoch = -1;
     long topStamp = -1;
@@ -161,6 +164,7 @@ class Isam2Backend : public Backend {
   // Per-update state.
   long epoch_ = 0;
   long updateCount_ = 0;
+  bool relinearizeNext_ = false;
   long pathCounter_ = 0;
   std::vector<int> affected_;
   std::vector<int> constrained_;

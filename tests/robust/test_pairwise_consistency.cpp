@@ -1,6 +1,7 @@
-// The pairwise-consistency (PCM) selection: on a trajectory that circles a square three
+// The pairwise-consistency (PCM) selection: on a noisy trajectory that circles a square three
 // times, the true revisits form one mutually consistent set and wrong closures do not join
-// it; closures it cannot judge are left out; 2D and 3D alike.
+// it, in 2D and 3D; the scales and the short-cycle calibration set the test's width; a
+// closure nothing agrees with stays out.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -28,67 +29,92 @@ SE3 lift(const SE2& x) { return SE3(expSO3(Vec3(0, 0, x.theta)), Vec3(x.x, x.y, 
 
 struct Scenario {
   FactorGraph graph;
-  Values odometry;
+  Values odometry;  // the odometry measurements composed
   std::vector<int> trueClosures, wrongClosures;
 };
 
-// Three laps with exact odometry (σ 0.1 m, 0.01 rad a step); closures (σ 0.1 m, 0.01 rad)
-// from lap 3 back to laps 1 and 2 (true: the same spot, measured exactly) and `wrong` random
-// pairs measured 2–4 m and 0.5–1 rad off their true relative pose.
-Scenario square(bool in3d, int wrong, unsigned seed) {
+// The measurement noise drawn (σ_t, σ_r per axis, times `noise`), the information stated
+// (for σ 0.1 m, 0.01 rad) and how far off the wrong closures are (times `wrongScale`: 2–4 m,
+// 0.5–1 rad).
+struct WalkSetup {
+  bool in3d = false;
+  int wrong = 30;
+  double noise = 1.0;       // drawn σ = noise × (0.1 m, 0.01 rad)
+  double wrongScale = 1.0;  // wrong closures' error × this
+  unsigned seed = 7;
+};
+
+// Three laps of the square; odometry and closures measured with noise; closures from lap 3
+// back to laps 1 and 2 at the same spot (true) and `wrong` random pairs measured off their
+// true relative pose.
+Scenario square(const WalkSetup& setup) {
   Scenario s;
   const int n = 3 * kLap;
+  std::mt19937 rng(setup.seed);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  auto noisy = [&](const SE2& z) {
+    return z * SE2(0.1 * setup.noise * gauss(rng), 0.1 * setup.noise * gauss(rng),
+                   0.01 * setup.noise * gauss(rng));
+  };
   auto between = [&](int i, int j, const SE2& z, FactorRole role) {
-    const double rotationInformation = 1e4;
-    if (in3d) {
+    if (setup.in3d) {
       Mat6 information = Mat6::Identity() * 100.0;
-      information.bottomRightCorner<3, 3>() *= rotationInformation / 100.0;
+      information.bottomRightCorner<3, 3>() *= 100.0;
       s.graph.add(
           std::make_shared<BetweenFactorSE3>(poseKey(i), poseKey(j), lift(z), information, role));
     } else {
-      const Eigen::Matrix3d information =
-          Eigen::Vector3d(100.0, 100.0, rotationInformation).asDiagonal();
+      const Eigen::Matrix3d information = Eigen::Vector3d(100.0, 100.0, 1e4).asDiagonal();
       s.graph.add(std::make_shared<BetweenFactorSE2>(poseKey(i), poseKey(j), z, information, role));
     }
   };
+  SE2 composed;
   for (int i = 0; i < n; ++i) {
-    if (in3d)
-      s.odometry.insert(poseKey(i), lift(walk(i)));
+    if (i > 0) {
+      const SE2 z = noisy(walk(i - 1).between(walk(i)));
+      between(i - 1, i, z, FactorRole::Odometry);
+      composed = composed * z;
+    }
+    if (setup.in3d)
+      s.odometry.insert(poseKey(i), lift(composed));
     else
-      s.odometry.insert(poseKey(i), walk(i));
-    if (i > 0) between(i - 1, i, walk(i - 1).between(walk(i)), FactorRole::Odometry);
+      s.odometry.insert(poseKey(i), composed);
   }
   for (int i = 2 * kLap; i < n; i += 3) {
     s.trueClosures.push_back(s.graph.size());
-    between(i - kLap, i, SE2(), FactorRole::LoopClosure);
+    between(i - kLap, i, noisy(SE2()), FactorRole::LoopClosure);
     s.trueClosures.push_back(s.graph.size());
-    between(i - 2 * kLap, i, SE2(), FactorRole::LoopClosure);
+    between(i - 2 * kLap, i, noisy(SE2()), FactorRole::LoopClosure);
   }
-  std::mt19937 rng(seed);
   std::uniform_int_distribution<int> pose(0, n - 1);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
   auto sign = [&] { return u(rng) < 0.5 ? -1.0 : 1.0; };
-  for (int k = 0; k < wrong; ++k) {
+  for (int k = 0; k < setup.wrong; ++k) {
     int a = pose(rng), b = pose(rng);
     if (std::abs(a - b) < 2) b = (a + 5) % n;
-    const double heading = 2.0 * M_PI * u(rng), off = 2.0 + 2.0 * u(rng);
+    const double heading = 2.0 * M_PI * u(rng), off = setup.wrongScale * (2.0 + 2.0 * u(rng));
     const SE2 error(off * std::cos(heading), off * std::sin(heading),
-                    sign() * (0.5 + 0.5 * u(rng)));
+                    setup.wrongScale * sign() * (0.5 + 0.5 * u(rng)));
     s.wrongClosures.push_back(s.graph.size());
     between(a, b, walk(a).between(walk(b)) * error, FactorRole::LoopClosure);
   }
   return s;
 }
 
+int wrongIn(const Scenario& s, const ConsistentSet& set) {
+  int in = 0;
+  for (int i : s.wrongClosures) in += set.member[i];
+  return in;
+}
+
 void expectTrueSetFound(bool in3d) {
-  const Scenario s = square(in3d, 30, 7);
+  WalkSetup setup;
+  setup.in3d = in3d;
+  const Scenario s = square(setup);
   const ConsistentSet set = pairwiseConsistentClosures(s.graph, s.odometry);
   EXPECT_EQ(set.judged, static_cast<int>(s.trueClosures.size() + s.wrongClosures.size()));
   for (int i : s.trueClosures) EXPECT_TRUE(set.member[i]) << "true closure " << i;
-  int wrongIn = 0;
-  for (int i : s.wrongClosures) wrongIn += set.member[i];
-  EXPECT_EQ(wrongIn, 0);
-  EXPECT_EQ(set.size, static_cast<int>(s.trueClosures.size()) + wrongIn);
+  EXPECT_EQ(wrongIn(s, set), 0);
+  EXPECT_EQ(set.size, static_cast<int>(s.trueClosures.size()));
   for (int i = 0; i < s.graph.size(); ++i)
     if (s.graph[i]->role() == FactorRole::Odometry) EXPECT_FALSE(set.member[i]);
 }
@@ -97,26 +123,53 @@ TEST(PairwiseConsistency, KeepsTheTrueRevisitsAndNoWrongClosure2D) { expectTrueS
 
 TEST(PairwiseConsistency, KeepsTheTrueRevisitsAndNoWrongClosure3D) { expectTrueSetFound(true); }
 
-// The stated uncertainty decides: a closure 1.5 m off is inconsistent with the exact revisits
-// near it under the stated information, and joins them once odometry and closures are
-// declared 100× noisier (the scales the solver passes when the information is miscalibrated).
-TEST(PairwiseConsistency, OdometryScaleWidensTheTest) {
-  Scenario s = square(false, 0, 1);
+// The stated uncertainty decides: a closure 1.5 m off is inconsistent with the revisits near
+// it under the stated information, and joins them once odometry and closures are declared
+// 100× noisier (the scales the solver passes when the information is miscalibrated).
+TEST(PairwiseConsistency, ScalesWidenTheTest) {
+  WalkSetup setup;
+  setup.wrong = 0;
+  Scenario s = square(setup);
   const int offset = s.graph.size();
   s.graph.add(std::make_shared<BetweenFactorSE2>(
       poseKey(kLap + 5), poseKey(2 * kLap + 5), SE2(1.5, 0.0, 0.0),
-      Eigen::Matrix3d::Identity() * 100.0, FactorRole::LoopClosure));
-  EXPECT_FALSE(pairwiseConsistentClosures(s.graph, s.odometry).member[offset]);
-  ConsistencyOptions loose;
+      Eigen::Vector3d(100.0, 100.0, 1e4).asDiagonal(), FactorRole::LoopClosure));
+  ConsistencyOptions stated;
+  stated.calibrationWindow = 0;  // the scales alone
+  EXPECT_FALSE(pairwiseConsistentClosures(s.graph, s.odometry, stated).member[offset]);
+  ConsistencyOptions loose = stated;
   loose.odometryScale = 100.0;
   loose.closureScale = 100.0;
   EXPECT_TRUE(pairwiseConsistentClosures(s.graph, s.odometry, loose).member[offset]);
 }
 
+// Under-confident information (the noise 100× smaller than stated, as on parking-garage):
+// closures 6–12 cm off pass the stated test, and the short-cycle calibration finds the factor
+// (about 10⁻⁴) and keeps them out. Both halves are checked.
+TEST(PairwiseConsistency, ShortCyclesCalibrateUnderConfidentInformation) {
+  WalkSetup setup;
+  setup.noise = 0.01;
+  setup.wrongScale = 0.03;
+  const Scenario s = square(setup);
+  ConsistencyOptions uncalibrated;
+  uncalibrated.calibrationWindow = 0;
+  EXPECT_GT(wrongIn(s, pairwiseConsistentClosures(s.graph, s.odometry, uncalibrated)), 10);
+  const ConsistentSet set = pairwiseConsistentClosures(s.graph, s.odometry);
+  EXPECT_GE(set.calibrationPairs, 30);
+  EXPECT_LT(set.calibration, 1e-3);
+  EXPECT_GT(set.calibration, 1e-5);
+  EXPECT_EQ(wrongIn(s, set), 0);
+  int trueIn = 0;
+  for (int i : s.trueClosures) trueIn += set.member[i];
+  EXPECT_GE(trueIn, static_cast<int>(0.9 * s.trueClosures.size()));
+}
+
 // A closure to a pose off the chain (a second robot's, without odometry) has no partner to
 // agree with: judged, but not in the set.
 TEST(PairwiseConsistency, LeavesOutAClosureNothingAgreesWith) {
-  Scenario s = square(false, 0, 1);
+  WalkSetup setup;
+  setup.wrong = 0;
+  Scenario s = square(setup);
   s.odometry.insert(poseKey(0, 1), SE2());
   const int other = s.graph.size();
   s.graph.add(std::make_shared<BetweenFactorSE2>(
