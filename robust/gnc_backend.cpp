@@ -277,15 +277,34 @@ void GncBackend::optimize() {
     std::vector<double> weights, r2;
     OptimizerResult last;
   };
+  // The current solution (at the current gate's truncated cost), and going back to one.
+  auto snapshot = [&] { return Candidate{tlsCost(), estimate_, weights_, r2, last}; };
+  auto restore = [&](const Candidate& c) {
+    estimate_.assignFrom(c.estimate);
+    weights_ = c.weights;
+    r2 = c.r2;
+    last = c.last;
+  };
+  auto rejectedCount = [&] {
+    int count = 0;
+    for (int i = 0; i < n; ++i) count += cbar[i] > 0.0 && weights_[i] < 0.5;
+    return count;
+  };
+  // Every uncertain factor's threshold below its χ²_dim(p) default.
+  auto belowDefaults = [&](const std::vector<double>& thresholds) {
+    for (int i = 0; i < n; ++i)
+      if (cbar[i] > 0.0 && !(thresholds[i] < cbar[i])) return false;
+    return true;
+  };
   Candidate best;
   std::string bestName, costs;
   auto consider = [&](const std::string& name) {
-    const double cost = tlsCost();
+    Candidate c = snapshot();
     char buf[64];
-    std::snprintf(buf, sizeof buf, "%s%s %.6g", costs.empty() ? "" : ", ", name.c_str(), cost);
+    std::snprintf(buf, sizeof buf, "%s%s %.6g", costs.empty() ? "" : ", ", name.c_str(), c.cost);
     costs += buf;
-    if (bestName.empty() || cost < best.cost) {
-      best = Candidate{cost, estimate_, weights_, r2, last};
+    if (bestName.empty() || c.cost < best.cost) {
+      best = std::move(c);
       bestName = name;
     }
   };
@@ -313,11 +332,9 @@ void GncBackend::optimize() {
     if (wider) {
       gate = next;
       c2 = gate;
-      int before = 0;
-      for (int i = 0; i < n; ++i) before += cbar[i] > 0.0 && weights_[i] < 0.5;
+      const int before = rejectedCount();
       refine(refineCap);
-      int after = 0;
-      for (int i = 0; i < n; ++i) after += cbar[i] > 0.0 && weights_[i] < 0.5;
+      const int after = rejectedCount();
       char buf[128];
       std::snprintf(buf, sizeof buf,
                     "; re-check at the tail gate %.3g x chi2_dim(0.5): %d -> %d rejected", g,
@@ -352,10 +369,7 @@ void GncBackend::optimize() {
       if (gated) refine(refineCap);
       consider("from odometry");
     }
-    estimate_.assignFrom(best.estimate);
-    weights_ = best.weights;
-    r2 = best.r2;
-    last = best.last;
+    restore(best);
     log += "; kept " + bestName + " (truncated costs " + costs + ")";
     // The gate was estimated from the first GNC, whose solution outliers may have bent: its
     // accepted closures' tail is then too wide. Re-estimate it from the kept solution; while
@@ -386,18 +400,13 @@ void GncBackend::optimize() {
         refine(refineCap);
         consider("from odometry");
       }
-      estimate_.assignFrom(best.estimate);
-      weights_ = best.weights;
-      r2 = best.r2;
-      last = best.last;
+      restore(best);
       char buf[96];
       std::snprintf(buf, sizeof buf, "; gate re-estimated: %.3g x chi2_dim(0.5), kept ", tailGate_);
       log += buf + bestName + " (" + costs + ")";
       ++rounds;
     }
-    bool tightened = gated;
-    for (int i = 0; i < n && tightened; ++i)
-      if (cbar[i] > 0.0) tightened = gate[i] < cbar[i];
+    const bool tightened = gated && belowDefaults(gate);
     if ((rounds > 0 || tightened) && gnc_.readmit)
       readmitAtTail(rounds > 0 ? firstGate : std::numeric_limits<double>::infinity());
   }
@@ -406,9 +415,7 @@ void GncBackend::optimize() {
     // groups of 10). If anything is rejected, start once more from the largest pairwise
     // consistent set of closures (PCM) — its linear initialization with the trusted factors —
     // decide 0/1 against the gate there, and keep it if its truncated cost is lower.
-    int rejectedNow = 0;
-    for (int i = 0; i < n; ++i) rejectedNow += cbar[i] > 0.0 && weights_[i] < 0.5;
-    if (rejectedNow > 0) {
+    if (rejectedCount() > 0) {
       c2 = gate;
       ConsistencyOptions pcm;
       pcm.probability = gnc_.consistencyProbability;
@@ -427,10 +434,7 @@ void GncBackend::optimize() {
       const Values consistentStart = set.size > 0 ? trustedLinearStart(set.member) : Values();
       char buf[256];
       if (consistentStart.size() == estimate_.size()) {
-        const double before = tlsCost();
-        const Values keptEstimate = estimate_;
-        const std::vector<double> keptWeights = weights_, keptR2 = r2;
-        const OptimizerResult keptLast = last;
+        const Candidate kept = snapshot();
         estimate_.assignFrom(consistentStart);
         for (int i = 0; i < n; ++i)
           if (cbar[i] > 0.0) weights_[i] = set.member[i] ? 1.0 : 0.0;
@@ -457,34 +461,25 @@ void GncBackend::optimize() {
         refine(refineCap);
         gate = keptGate;  // both judged by the same truncated cost
         const double after = tlsCost();
-        const bool keep = after < before;
-        bool tightenedHere = false;
+        const bool keep = after < kept.cost;
         if (keep && ownGate) {
           gate = candidateGate;
           scale_ = candidateScale, tailGate_ = candidateTail;
-          tightenedHere = true;
-          for (int i = 0; i < n && tightenedHere; ++i)
-            if (cbar[i] > 0.0) tightenedHere = gate[i] < cbar[i];
         }
-        if (!keep) {
-          estimate_.assignFrom(keptEstimate);
-          weights_ = keptWeights;
-          r2 = keptR2;
-          last = keptLast;
-        }
+        if (!keep) restore(kept);
         std::snprintf(buf, sizeof buf,
                       "; from the consistent set (%d of %d closures; scales %.3g, %.3g, "
                       "calibrated x%.3g on %d short cycles): %s (truncated cost %.6g vs %.6g)",
                       set.size, set.judged, pcm.odometryScale, pcm.closureScale, set.calibration,
-                      set.calibrationPairs, keep ? "kept" : "dropped", after, before);
+                      set.calibrationPairs, keep ? "kept" : "dropped", after, kept.cost);
         log += buf;
-        buf[0] = '\0';
-        if (tightenedHere && gnc_.readmit) readmitAtTail(std::numeric_limits<double>::infinity());
+        if (keep && ownGate && belowDefaults(gate) && gnc_.readmit)
+          readmitAtTail(std::numeric_limits<double>::infinity());
       } else {
         std::snprintf(buf, sizeof buf, "; consistent set: %d of %d closures, no start", set.size,
                       set.judged);
+        log += buf;
       }
-      log += buf;
     }
   }
   // The kept solution, solved to convergence (its solves were capped); with the gate acting,
@@ -569,15 +564,11 @@ void GncBackend::optimize() {
         admit.clear();
       }
       if (!admit.empty()) {
-        const double before = tlsCost();
-        const Values keptEstimate = estimate_;
-        const std::vector<double> keptWeights = weights_, keptR2 = r2;
-        const OptimizerResult keptLast = last;
+        const Candidate previous = snapshot();
+        const double before = previous.cost;
         for (int i : admit) weights_[i] = 1.0;
         ++refine_;
-        last = solveOnce();
-        iterations += last.iterations;
-        residuals();
+        solveCapped(0);
         refine(0);
         const double after = tlsCost();
         char buf[160];
@@ -588,10 +579,7 @@ void GncBackend::optimize() {
                         "(truncated cost %.6g -> %.6g)",
                         admit.size(), before, after);
         } else {
-          estimate_.assignFrom(keptEstimate);
-          weights_ = keptWeights;
-          r2 = keptR2;
-          last = keptLast;
+          restore(previous);
           std::snprintf(
               buf, sizeof buf,
               "; re-check: %zu rejected closures tried, dropped (truncated cost %.6g vs %.6g)",

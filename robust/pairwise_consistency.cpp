@@ -101,10 +101,15 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values&
   const double dimT = planar ? 2.0 : 3.0, dimR = planar ? 1.0 : 3.0;
   const double lever = planar ? 1.0 : 2.0;  // axes a rotation error displaces a point along
 
+  struct Judged {
+    int a, b;  // chain indices of the closure's ends
+    Rigid z, zInverse;
+    double varT, varR;
+  };
   std::vector<char> hasStep(n, 0);
   std::vector<double> stepT(n, 0.0), stepR(n, 0.0);
-  std::vector<Link> closures;
-  std::vector<int> closureFactor;
+  std::vector<Judged> judged;
+  std::vector<int> judgedFactor;  // graph index of each judged closure
   for (int i = 0; i < graph.size(); ++i) {
     const Factor& f = *graph[i];
     Link l;
@@ -118,10 +123,9 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values&
       stepT[lo] = options.odometryScale * l.varT;
       stepR[lo] = options.odometryScale * l.varR;
     } else if (f.role() == FactorRole::LoopClosure) {
-      l.varT *= options.closureScale;
-      l.varR *= options.closureScale;
-      closures.push_back(l);
-      closureFactor.push_back(i);
+      judged.push_back({a->second, b->second, l.z, l.z.inverse(), options.closureScale * l.varT,
+                        options.closureScale * l.varR});
+      judgedFactor.push_back(i);
     }
   }
 
@@ -149,19 +153,6 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values&
     varR += dimR * r0;
   };
 
-  struct Judged {
-    int a, b;  // chain indices of the closure's ends
-    Rigid z, zInverse;
-    double varT, varR;
-  };
-  std::vector<Judged> judged;
-  std::vector<int> judgedFactor;
-  for (size_t c = 0; c < closures.size(); ++c) {
-    const int a = index[closures[c].from], b = index[closures[c].to];
-    judged.push_back(
-        {a, b, closures[c].z, closures[c].z.inverse(), closures[c].varT, closures[c].varR});
-    judgedFactor.push_back(closureFactor[c]);
-  }
   const int m = static_cast<int>(judged.size());
   out.judged = m;
   if (m == 0) return out;

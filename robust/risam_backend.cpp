@@ -148,24 +148,18 @@ void RisamBackend::refreshGate() {
 FactorPtr RisamBackend::wrap(const FactorPtr& f, double mu, FactorId internal) const {
   const double c = std::sqrt(shapeSquared(f->dim()));
   const Values* at = options_.weightAtEstimate ? &inner_->estimate() : nullptr;
-  FactorPtr w;
   switch (f->size()) {
     case 1:
-      w = makeSig<1>(f, mu, c, at, internal);
-      break;
+      return makeSig<1>(f, mu, c, at, internal);
     case 2:
-      w = makeSig<2>(f, mu, c, at, internal);
-      break;
+      return makeSig<2>(f, mu, c, at, internal);
     case 3:
-      w = makeSig<3>(f, mu, c, at, internal);
-      break;
+      return makeSig<3>(f, mu, c, at, internal);
     case 4:
-      w = makeSig<4>(f, mu, c, at, internal);
-      break;
+      return makeSig<4>(f, mu, c, at, internal);
     default:
       throw std::invalid_argument("risam: factor with " + std::to_string(f->size()) + " keys");
   }
-  return w;
 }
 
 UpdateResult RisamBackend::update(const BackendUpdate& u) {

@@ -219,6 +219,36 @@ TEST(TailGate, MedianAndTailOfNormalizedChi2) {
   EXPECT_EQ(tailGate({1, 2, 3}, 3.0, 100.0).gate, 0.0);            // too few values
 }
 
+// The issue protocol's outliers on a reference dataset (groups of 10, seed 1).
+tools::OutlierResult protocolOutliers(const Reference& ref, int count, OutlierMode mode) {
+  tools::OutlierOptions o;
+  o.count = count;
+  o.mode = mode;
+  o.groupSize = 10;
+  o.seed = 1;
+  return tools::addOutliers(ref.dataset, o);
+}
+
+// One gnc-tls run with options g, printed with `label` and its stop reason.
+RunResult solveGnc(const GncOptions& g, const tools::OutlierResult& data, const Reference& ref,
+                   const std::string& label) {
+  const PoseGraphProblem p = buildProblem(data.graph);
+  GncBackend b(BackendOptions{}, g);
+  feedAll(b, p);
+  RunResult r = score(b, p, data);
+  std::printf("[robust] gnc-tls %s: recall %.3f precision %.3f chi2(true) %.6g vs %.6g (%s)\n",
+              label.c_str(), r.scores.recall, r.scores.precision, r.inlierChi2, ref.optimumChi2,
+              b.summary().stopReason.c_str());
+  return r;
+}
+
+// Every outlier rejected, nothing true, at the outlier-free optimum.
+void expectExact(const RunResult& r, const Reference& ref) {
+  EXPECT_EQ(r.scores.recall, 1.0);
+  EXPECT_EQ(r.scores.precision, 1.0);
+  EXPECT_LE(std::abs(r.inlierChi2 - ref.optimumChi2), 1e-3 * ref.optimumChi2);
+}
+
 // manhattan's loop closures are heavy-tailed (largest true χ² 31× the median, above
 // χ²₃(0.99)): a GNC with the fixed χ²_dim(0.99) threshold lands in a local minimum that drops
 // true closures (precision 0.79 on the first 1500 poses with 50 random outliers); the
@@ -226,34 +256,17 @@ TEST(TailGate, MedianAndTailOfNormalizedChi2) {
 // checked, so the test fails if the data stops exercising the problem.
 TEST(NoiseAwareGnc, KeepsManhattansHeavyTailedTrueClosures) {
   const Reference& ref = reference("manhattan.g2o:1500");
-  for (OutlierMode mode : {OutlierMode::Random}) {
-    tools::OutlierOptions o;
-    o.count = 50;
-    o.mode = mode;
-    o.groupSize = 10;
-    o.seed = 1;
-    const tools::OutlierResult data = tools::addOutliers(ref.dataset, o);
-    const PoseGraphProblem p = buildProblem(data.graph);
-    auto solveWith = [&](double tailExponent) {
-      GncOptions g;
-      g.tailExponent = tailExponent;
-      GncBackend b(BackendOptions{}, g);
-      feedAll(b, p);
-      RunResult r = score(b, p, data);
-      std::printf(
-          "[robust] gnc-tls manhattan:1500 %s %d, tail exponent %g: recall %.3f "
-          "precision %.3f chi2(true) %.6g vs %.6g (%s)\n",
-          tools::outlierModeName(mode), o.count, tailExponent, r.scores.recall, r.scores.precision,
-          r.inlierChi2, ref.optimumChi2, b.summary().stopReason.c_str());
-      return r;
-    };
-    const RunResult plain = solveWith(-1.0);  // noise-aware gate off
-    EXPECT_LT(plain.scores.precision, 0.95) << "the fixed threshold no longer drops true closures";
-    const RunResult aware = solveWith(GncOptions{}.tailExponent);
-    EXPECT_EQ(aware.scores.recall, 1.0);
-    EXPECT_EQ(aware.scores.precision, 1.0);
-    EXPECT_LE(std::abs(aware.inlierChi2 - ref.optimumChi2), 1e-3 * ref.optimumChi2);
-  }
+  const tools::OutlierResult data = protocolOutliers(ref, 50, OutlierMode::Random);
+  auto solveWith = [&](double tailExponent) {
+    GncOptions g;
+    g.tailExponent = tailExponent;
+    char label[64];
+    std::snprintf(label, sizeof label, "manhattan:1500 random 50, tail exponent %g", tailExponent);
+    return solveGnc(g, data, ref, label);
+  };
+  const RunResult plain = solveWith(-1.0);  // noise-aware gate off
+  EXPECT_LT(plain.scores.precision, 0.95) << "the fixed threshold no longer drops true closures";
+  expectExact(solveWith(GncOptions{}.tailExponent), ref);
 }
 
 // Groups of mutually consistent outliers bend the all-closures least-squares start on intel
@@ -263,36 +276,20 @@ TEST(NoiseAwareGnc, KeepsManhattansHeavyTailedTrueClosures) {
 // odometry start finds the truth; the cheaper candidate is kept. Both halves are checked.
 TEST(GncOdometryStart, EscapesTheMinimumGroupsBendTheStartInto) {
   const Reference& ref = reference("intel.g2o");
-  tools::OutlierOptions o;
-  o.count = 100;
-  o.mode = OutlierMode::Group;
-  o.groupSize = 10;
-  o.seed = 1;
-  const tools::OutlierResult data = tools::addOutliers(ref.dataset, o);
-  const PoseGraphProblem p = buildProblem(data.graph);
+  const tools::OutlierResult data = protocolOutliers(ref, 100, OutlierMode::Group);
   auto solveWith = [&](bool odometryStart) {
     GncOptions g;
     g.odometryStart = odometryStart;
     // Without the odometry start, the gate's own rerun (candidate B) would step in; the
     // plain GNC from the least-squares start is what is shown failing.
     if (!odometryStart) g.tailExponent = -1.0;
-    GncBackend b(BackendOptions{}, g);
-    feedAll(b, p);
-    RunResult r = score(b, p, data);
-    std::printf(
-        "[robust] gnc-tls intel group 100, odometry start %d: recall %.3f precision %.3f "
-        "chi2(true) %.6g vs %.6g (%s)\n",
-        odometryStart, r.scores.recall, r.scores.precision, r.inlierChi2, ref.optimumChi2,
-        b.summary().stopReason.c_str());
-    return r;
+    return solveGnc(g, data, ref,
+                    std::string("intel group 100, odometry start ") + (odometryStart ? "1" : "0"));
   };
   const RunResult lsOnly = solveWith(false);
   EXPECT_LT(std::min(lsOnly.scores.precision, lsOnly.scores.recall), 0.99)
       << "the least-squares start no longer leads the GNC astray";
-  const RunResult both = solveWith(true);
-  EXPECT_EQ(both.scores.recall, 1.0);
-  EXPECT_EQ(both.scores.precision, 1.0);
-  EXPECT_LE(std::abs(both.inlierChi2 - ref.optimumChi2), 1e-3 * ref.optimumChi2);
+  expectExact(solveWith(true), ref);
 }
 
 // With 1000 outliers in groups of 10 on intel (seed 1), the groups bend the map from both the
@@ -302,32 +299,17 @@ TEST(GncOdometryStart, EscapesTheMinimumGroupsBendTheStartInto) {
 // solution gives, finds the truth. Both halves are checked.
 TEST(GncConsistentStart, EscapesWhereConsistentGroupsBendEveryStart) {
   const Reference& ref = reference("intel.g2o");
-  tools::OutlierOptions o;
-  o.count = 1000;
-  o.mode = OutlierMode::Group;
-  o.groupSize = 10;
-  o.seed = 1;
-  const tools::OutlierResult data = tools::addOutliers(ref.dataset, o);
-  const PoseGraphProblem p = buildProblem(data.graph);
+  const tools::OutlierResult data = protocolOutliers(ref, 1000, OutlierMode::Group);
   auto solveWith = [&](bool consistentStart) {
     GncOptions g;
     g.consistentStart = consistentStart;
-    GncBackend b(BackendOptions{}, g);
-    feedAll(b, p);
-    RunResult r = score(b, p, data);
-    std::printf(
-        "[robust] gnc-tls intel group 1000, consistent start %d: recall %.3f precision "
-        "%.3f chi2(true) %.6g vs %.6g (%s)\n",
-        consistentStart, r.scores.recall, r.scores.precision, r.inlierChi2, ref.optimumChi2,
-        b.summary().stopReason.c_str());
-    return r;
+    return solveGnc(
+        g, data, ref,
+        std::string("intel group 1000, consistent start ") + (consistentStart ? "1" : "0"));
   };
   const RunResult without = solveWith(false);
   EXPECT_LT(without.scores.recall, 0.99) << "the groups no longer bend both starts";
-  const RunResult with = solveWith(true);
-  EXPECT_EQ(with.scores.recall, 1.0);
-  EXPECT_EQ(with.scores.precision, 1.0);
-  EXPECT_LE(std::abs(with.inlierChi2 - ref.optimumChi2), 1e-3 * ref.optimumChi2);
+  expectExact(solveWith(true), ref);
 }
 
 }  // namespace
