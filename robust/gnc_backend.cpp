@@ -7,6 +7,7 @@
 #include <limits>
 #include <unordered_map>
 
+#include "robust/closure_leverage.h"
 #include "robust/pairwise_consistency.h"
 #include "robust/robust_factors.h"
 #include "solvers/init/initialization.h"
@@ -123,16 +124,26 @@ void GncBackend::optimize() {
   const bool noiseAware = gnc_.tailExponent >= 0.0 && options_.robustParameter <= 0.0;
   // Solves with at most `cap` LM iterations (0: the optimizer's own limit), which the
   // intermediate solves need only to track the weights; the kept solution is polished.
+  // With warmDamping, each solve starts from the damping the previous one ended with.
   const int fullIterations = optimizer().options().maxIterations;
+  const double defaultLambda = optimizer().options().initialLambda;
+  double warmLambda = 0.0;  // 0: the optimizer's own initial damping
   auto capped = [&](int cap, auto&& solve) {
-    optimizer().options().maxIterations = cap > 0 ? std::min(cap, fullIterations) : fullIterations;
+    OptimizerOptions& o = optimizer().options();
+    o.maxIterations = cap > 0 ? std::min(cap, fullIterations) : fullIterations;
+    if (gnc_.warmDamping && warmLambda > 0.0) o.initialLambda = warmLambda;
+    auto reset = [&] {
+      optimizer().options().maxIterations = fullIterations;
+      optimizer().options().initialLambda = defaultLambda;
+    };
     try {
       solve();
     } catch (...) {
-      optimizer().options().maxIterations = fullIterations;
+      reset();
       throw;
     }
-    optimizer().options().maxIterations = fullIterations;
+    reset();
+    warmLambda = lastSolve_.finalTrustParameter;
   };
   auto solveCapped = [&](int cap) {
     capped(cap, [&] { last = solveOnce(); });
@@ -245,7 +256,7 @@ void GncBackend::optimize() {
     }
     return false;
   };
-  const bool gated = noiseAware && estimateGate(gate);  // refine, redo with the gate
+  bool gated = noiseAware && estimateGate(gate);  // refine, redo with the gate
   // Refinement: decide 0/1 against the gate at the current estimate, re-solve (at most
   // `cap` iterations each), repeat.
   auto refine = [&](int cap) {
@@ -330,6 +341,8 @@ void GncBackend::optimize() {
         if (next[i] > gate[i]) wider = true;
       }
     if (wider) {
+      const Candidate previous = snapshot();
+      const std::vector<double> previousGate = gate;
       gate = next;
       c2 = gate;
       const int before = rejectedCount();
@@ -340,8 +353,34 @@ void GncBackend::optimize() {
                     "; re-check at the tail gate %.3g x chi2_dim(0.5): %d -> %d rejected", g,
                     before, after);
       log += buf;
+      if (weights_ == previous.weights) {
+        // Nothing came back: the tighter gate, which separated just as well, stands (the
+        // wider one would let later checks take in wrong closures that happen to fit a
+        // weakly held stretch: intel with 1000 outliers, one or two accepted).
+        restore(previous);
+        gate = previousGate;
+        c2 = gate;
+        log += ", gate kept";
+        return;
+      }
       tailGate_ = g;
     }
+  };
+  // The gate re-estimated from the current solution; taken (gate and thresholds) if it shrinks
+  // by more than widenFactor for every uncertain factor, else nothing changes.
+  auto shrinkGate = [&] {
+    std::vector<double> next;
+    const double usedScale = scale_, usedGate = tailGate_;
+    bool shrinks = estimateGate(next);
+    for (int i = 0; i < n && shrinks; ++i)
+      if (cbar[i] > 0.0) shrinks = next[i] * gnc_.widenFactor < gate[i];
+    if (!shrinks) {
+      scale_ = usedScale, tailGate_ = usedGate;
+      return false;
+    }
+    gate = next;
+    c2 = gate;
+    return true;
   };
   const bool odometryCandidate =
       odometryStart.size() == estimate_.size() && odometryStart.size() > 0;
@@ -378,17 +417,7 @@ void GncBackend::optimize() {
     int rounds = 0;
     const double firstGate = tailGate_;
     for (int round = 0; gated && round < gnc_.maxGateRounds; ++round) {
-      std::vector<double> next;
-      const double usedScale = scale_, usedGate = tailGate_;
-      bool shrinks = estimateGate(next);
-      for (int i = 0; i < n && shrinks; ++i)
-        if (cbar[i] > 0.0) shrinks = next[i] * gnc_.widenFactor < gate[i];
-      if (!shrinks) {
-        scale_ = usedScale, tailGate_ = usedGate;
-        break;
-      }
-      gate = next;
-      c2 = gate;
+      if (!shrinkGate()) break;
       bestName.clear();
       costs.clear();
       refine(refineCap);
@@ -410,6 +439,97 @@ void GncBackend::optimize() {
     if ((rounds > 0 || tightened) && gnc_.readmit)
       readmitAtTail(rounds > 0 ? firstGate : std::numeric_limits<double>::infinity());
   }
+  // Sets the weights of `factors` to `weight`, re-solves, decides against the gate, and keeps
+  // the result if the truncated cost dropped (else goes back). Logs what happened as `what`.
+  auto tryDecisions = [&](const std::vector<int>& factors, double weight, const char* what,
+                          int cap) {
+    const Candidate previous = snapshot();
+    for (int i : factors) weights_[i] = weight;
+    ++refine_;
+    solveCapped(cap);
+    refine(cap);
+    const double after = tlsCost();
+    const bool kept = after < previous.cost;
+    if (!kept) restore(previous);
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "; %s: %zu closures, %s (truncated cost %.6g -> %.6g)", what,
+                  factors.size(), kept ? "kept" : "dropped", previous.cost, after);
+    log += buf;
+    return kept;
+  };
+  const JointMarginalsFn jointMarginal = [this](const std::vector<std::vector<Key>>& sets) {
+    return jointMarginals(sets);
+  };
+  // Re-check of the rejected closures against the map's own uncertainty: accepting a closure
+  // (or a cluster) G raises the cost by about rᵀ(I + JΣJᵀ)⁻¹r (robust/closure_leverage.h)
+  // instead of Σ_G gate_i. Those for which that is a net drop are accepted together, kept if
+  // the truncated cost did drop (a stiff true closure left out of a locally misfit map:
+  // manhattan with 1000 outliers). Clusters too: a stretch held off by wrong closures can be
+  // too stiff for one true closure to pull back.
+  auto admitFitting = [&](int cap) {
+    c2 = gate;
+    std::vector<int> rejectedOnes;
+    for (int i = 0; i < n; ++i)
+      if (cbar[i] > 0.0 && weights_[i] < 0.5) rejectedOnes.push_back(i);
+    std::vector<std::vector<int>> groups;
+    for (int i : rejectedOnes) groups.push_back({i});
+    for (auto& c : closureClusters(graph_, estimate_, rejectedOnes, gnc_.admitWindow))
+      if (c.size() > 1 && static_cast<int>(c.size()) <= gnc_.maxCluster)
+        groups.push_back(std::move(c));
+    const std::vector<double> rise =
+        predictedCostChange(graph_, estimate_, groups, GroupChange::Add, jointMarginal);
+    std::vector<char> take(n, 0);
+    for (size_t g = 0; g < groups.size(); ++g) {
+      double net = rise[g];
+      for (int i : groups[g]) net -= gate[i];
+      if (net < 0.0)
+        for (int i : groups[g]) take[i] = 1;
+    }
+    std::vector<int> admit;
+    for (int i : rejectedOnes)
+      if (take[i]) admit.push_back(i);
+    return !admit.empty() && tryDecisions(admit, 1.0, "re-check, rejected that fit", cap);
+  };
+  // The converse: a few wrong closures that agree with each other can hold the map bent with
+  // true closures pushed out (manhattan, a group of 10 with 3 accepted and 2 true ones
+  // rejected). Removing an accepted cluster G lowers the cost by rᵀ(I − JΣJᵀ)⁻¹r and adds
+  // Σ_G gate_i: clusters for which that is a net drop are rejected together (if that fails,
+  // the most promising alone), kept if the truncated cost dropped.
+  auto dropBending = [&](int cap) {
+    c2 = gate;
+    std::vector<int> accepted;
+    for (int i = 0; i < n; ++i)
+      if (cbar[i] > 0.0 && weights_[i] >= 0.5) accepted.push_back(i);
+    std::vector<std::vector<int>> clusters;
+    for (auto& c : closureClusters(graph_, estimate_, accepted, gnc_.dropWindow))
+      if (static_cast<int>(c.size()) <= gnc_.maxCluster) clusters.push_back(std::move(c));
+    const std::vector<double> drop =
+        predictedCostChange(graph_, estimate_, clusters, GroupChange::Remove, jointMarginal);
+    std::vector<int> reject;
+    int best = -1;
+    double bestNet = 0.0;
+    for (size_t c = 0; c < clusters.size(); ++c) {
+      double net = -drop[c];
+      for (int i : clusters[c]) net += gate[i];
+      if (!(net < 0.0)) continue;
+      reject.insert(reject.end(), clusters[c].begin(), clusters[c].end());
+      if (net < bestNet) bestNet = net, best = static_cast<int>(c);
+    }
+    if (reject.empty()) return false;
+    if (tryDecisions(reject, 0.0, "drop check, accepted clusters that bend the map", cap))
+      return true;
+    return clusters[best].size() < reject.size() &&
+           tryDecisions(clusters[best], 0.0, "drop check, the most promising cluster", cap);
+  };
+  // Each change can make the other possible (a dropped group lets true closures back in).
+  // Solves capped at `cap` iterations (0: to convergence).
+  auto runChecks = [&](int cap) {
+    for (int round = 0; round < gnc_.checkRounds; ++round) {
+      const bool admitted = gnc_.recheckRejected && admitFitting(cap);
+      const bool dropped = gnc_.dropClusters && dropBending(cap);
+      if (!admitted && !dropped) break;
+    }
+  };
   if (odometryCandidate && gnc_.consistentStart) {
     // Consistent groups of wrong closures can bend the map from both starts (intel, 1000 in
     // groups of 10). If anything is rejected, start once more from the largest pairwise
@@ -460,8 +580,17 @@ void GncBackend::optimize() {
         gate = candidateGate;
         refine(refineCap);
         gate = keptGate;  // both judged by the same truncated cost
+        c2 = gate;
+        // A set of mutually consistent wrong closures (groups) can join the true ones: the
+        // checks can still drop them before the candidate is judged.
+        if (!(tlsCost() < kept.cost)) runChecks(refineCap);
         const double after = tlsCost();
-        const bool keep = after < kept.cost;
+        // The same decisions at a cost lower by rounding are not a better answer (taking its
+        // gate then cut parking-garage's true tail).
+        bool same = true;
+        for (int i = 0; i < n && same; ++i)
+          if (cbar[i] > 0.0) same = (weights_[i] >= 0.5) == (kept.weights[i] >= 0.5);
+        const bool keep = after < kept.cost && !same;
         if (keep && ownGate) {
           gate = candidateGate;
           scale_ = candidateScale, tailGate_ = candidateTail;
@@ -490,105 +619,22 @@ void GncBackend::optimize() {
     else
       solveCapped(0);
   }
-  if (gnc_.recheckRejected) {
-    // Final re-check of the rejected closures against the map's own uncertainty: accepting
-    // closure i raises the cost by about Δ = rᵀ(I + JΣJᵀ)⁻¹r (r, J whitened, Σ the joint
-    // marginal of its variables under the current weights) instead of its truncation gate_i.
-    // Those with Δ < gate_i would lower the truncated cost: accept them all, re-solve, refine
-    // against the gate, and keep the result if the truncated cost did drop (a stiff true
-    // closure left out of a locally misfit map: manhattan with 1000 outliers).
-    // In rounds: admitting some can make others fit (a subset-start map settling).
-    for (int round = 0; round < gnc_.recheckRounds; ++round) {
-      bool kept = false;
-      c2 = gate;
-      std::vector<int> cand;
-      for (int i = 0; i < n; ++i)
-        if (cbar[i] > 0.0 && weights_[i] < 0.5) cand.push_back(i);
-      std::vector<int> admit;
-      constexpr size_t kChunk = 64;
-      try {
-        for (size_t first = 0; first < cand.size(); first += kChunk) {
-          const size_t last = std::min(cand.size(), first + kChunk);
-          std::vector<Key> keys;
-          std::unordered_map<Key, int> col;  // key → first column in the joint marginal
-          int cols = 0;
-          for (size_t c = first; c < last; ++c) {
-            const Factor& f = *graph_[cand[c]];
-            for (int k = 0; k < f.size(); ++k)
-              if (col.emplace(f.key(k), cols).second) {
-                keys.push_back(f.key(k));
-                cols += varDim(f.varType(k));
-              }
-          }
-          const Eigen::MatrixXd sigma = marginalCovariance(keys);
-          if (sigma.rows() != cols) break;
-          for (size_t c = first; c < last; ++c) {
-            const Factor& f = *graph_[cand[c]];
-            std::array<const double*, kMaxFactorKeys> xp{};
-            std::array<JacobianBlock, kMaxFactorKeys> jb{};
-            std::array<double*, kMaxFactorKeys> jp{};
-            std::vector<int> at;
-            int fc = 0;
-            bool ok = true;
-            for (int k = 0; k < f.size(); ++k) {
-              const int slot = estimate_.slot(f.key(k));
-              if (slot < 0)
-                ok = false;
-              else
-                xp[k] = estimate_.data(slot);
-              jp[k] = jb[k].data();
-              fc += varDim(f.varType(k));
-            }
-            if (!ok) continue;
-            const int d = f.dim();
-            Eigen::VectorXd r(d);
-            f.evaluate(xp.data(), r.data(), jp.data());
-            Eigen::MatrixXd J(d, fc), S(fc, fc);
-            std::vector<int> off(f.size()), len(f.size());
-            for (int k = 0, c0 = 0; k < f.size(); c0 += varDim(f.varType(k)), ++k) {
-              off[k] = c0;
-              len[k] = varDim(f.varType(k));
-              J.middleCols(c0, len[k]) = Eigen::Map<const Eigen::MatrixXd>(jb[k].data(), d, len[k]);
-            }
-            for (int a = 0; a < f.size(); ++a)
-              for (int b = 0; b < f.size(); ++b)
-                S.block(off[a], off[b], len[a], len[b]) =
-                    sigma.block(col[f.key(a)], col[f.key(b)], len[a], len[b]);
-            const Eigen::MatrixXd cov = Eigen::MatrixXd::Identity(d, d) + J * S * J.transpose();
-            Eigen::LDLT<Eigen::MatrixXd> ldlt(cov);
-            if (ldlt.info() != Eigen::Success) continue;
-            if (r.dot(ldlt.solve(r)) < gate[cand[c]]) admit.push_back(cand[c]);
-          }
-        }
-      } catch (const std::exception&) {
-        admit.clear();
-      }
-      if (!admit.empty()) {
-        const Candidate previous = snapshot();
-        const double before = previous.cost;
-        for (int i : admit) weights_[i] = 1.0;
-        ++refine_;
-        solveCapped(0);
-        refine(0);
-        const double after = tlsCost();
-        char buf[160];
-        kept = after < before;
-        if (kept) {
-          std::snprintf(buf, sizeof buf,
-                        "; re-check: %zu rejected closures fit the map's uncertainty, kept "
-                        "(truncated cost %.6g -> %.6g)",
-                        admit.size(), before, after);
-        } else {
-          restore(previous);
-          std::snprintf(
-              buf, sizeof buf,
-              "; re-check: %zu rejected closures tried, dropped (truncated cost %.6g vs %.6g)",
-              admit.size(), before, after);
-        }
-        log += buf;
-      }
-      if (!kept) break;
-    }
+  runChecks(0);
+  // The gate once more, from the final solution: if the first was estimated from a bent map
+  // and the settled one's closures say it is over twice too wide (intel, 1000 in groups: the
+  // consistent-set start kept, the median 10x below the first one's), decide again against
+  // it (re-admitting the tail as above) and re-run the checks.
+  for (int round = 0; gnc_.regateAtEnd && noiseAware && round < gnc_.maxGateRounds; ++round) {
+    if (!shrinkGate()) break;
+    gated = true;
+    refine(0);
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "; final gate: %.3g x chi2_dim(0.5)", tailGate_);
+    log += buf;
+    const double shrunk = tailGate_;
+    if (gnc_.readmit && belowDefaults(gate)) readmitAtTail(std::numeric_limits<double>::infinity());
+    runChecks(0);
+    if (tailGate_ != shrunk) break;  // the true tail widened it back: estimating again repeats
   }
   reason = firstReason + log;
   if (noiseAware) {

@@ -45,6 +45,10 @@ struct GncOptions {
   /// Iterations per solve while refining a candidate's 0/1 decisions (0: the optimizer's own);
   /// the kept candidate is then solved to convergence.
   int refineIterations = 20;
+  /// Each solve starts from the Levenberg–Marquardt damping the previous one ended with, not
+  /// the optimizer's near-Gauss–Newton default: on parking-garage half the iterations of a
+  /// fresh start were rejected while the damping climbed back, eating the capped budgets.
+  bool warmDamping = true;
   /// Also redo the GNC from the least-squares start with c̄² = the gate (candidate B below).
   /// Off: the odometry-start candidate, judged by the same gate, has always done as well.
   bool rerunWithGate = false;
@@ -80,10 +84,22 @@ struct GncOptions {
   /// extrapolation (≤ the first gate), re-admitting rejected closures consistent with the
   /// settled solution.
   bool readmit = true;
-  /// Finally, re-admit rejected closures whose predicted cost rᵀ(I + JΣJᵀ)⁻¹r (Σ: joint
-  /// marginal of their variables) is below their gate, if that lowers the truncated cost.
+  /// Finally, re-admit rejected closures (alone, and in clusters whose ends lie within
+  /// admitWindow poses of each other's) whose predicted cost rise rᵀ(I + JΣJᵀ)⁻¹r (Σ: joint
+  /// marginal of their variables) is below their gates, and reject clusters of accepted
+  /// closures (ends within dropWindow) whose predicted removal gain rᵀ(I − JΣJᵀ)⁻¹r exceeds
+  /// their gates (robust/closure_leverage.h), each kept if the truncated cost does drop; both
+  /// in turn for up to checkRounds rounds, while either changes something. Clusters have at
+  /// most maxCluster closures.
   bool recheckRejected = true;
-  int recheckRounds = 3;  // while a round's admissions are kept
+  bool dropClusters = true;
+  /// After the checks, re-estimate the gate from the final solution (up to maxGateRounds
+  /// times, while it shrinks by more than widenFactor), decide again and re-run the checks.
+  bool regateAtEnd = true;
+  int checkRounds = 4;
+  int admitWindow = 50;
+  int dropWindow = 10;
+  int maxCluster = 20;
 };
 
 /// Noise scale and tail gate of normalized χ² values q_i = χ²_i/χ²_{dim_i}(0.5): scale = the

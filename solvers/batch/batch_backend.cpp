@@ -44,8 +44,7 @@ UpdateResult BatchBackend::update(const BackendUpdate& u) {
       moved = std::abs(estimate_.data(s)[i] - before.data(old)[i]) > options_.moveThreshold;
     if (moved) result.moved.push_back(estimate_.key(s));
   }
-  result.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return result;
 }
 
@@ -73,7 +72,10 @@ NonlinearOptimizer& BatchBackend::optimizer() {
   return *optimizer_;
 }
 
-OptimizerResult BatchBackend::solveOnce() { return optimizer().optimize(estimate_, factorWeights()); }
+OptimizerResult BatchBackend::solveOnce() {
+  lastSolve_ = optimizer().optimize(estimate_, factorWeights());
+  return lastSolve_;
+}
 
 void BatchBackend::optimize() {
   if (graph_.empty()) return;
@@ -98,6 +100,11 @@ void BatchBackend::optimize() {
 
 Eigen::MatrixXd BatchBackend::marginalCovariance(const std::vector<Key>& keys) {
   return jointMarginal(optimizer(), estimate_, keys, factorWeights());
+}
+
+std::vector<Eigen::MatrixXd> BatchBackend::jointMarginals(
+    const std::vector<std::vector<Key>>& keySets) {
+  return loopd::jointMarginals(optimizer(), estimate_, keySets, factorWeights());
 }
 
 std::vector<Eigen::MatrixXd> BatchBackend::marginals(const std::vector<Key>& keys) {

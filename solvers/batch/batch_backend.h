@@ -22,18 +22,21 @@ class BatchBackend : public Backend {
 
   /// Many keys at once, chunked column solves on one factorization.
   std::vector<Eigen::MatrixXd> marginals(const std::vector<Key>& keys) override;
+  /// The joint marginal of each key set, all on one factorization.
+  std::vector<Eigen::MatrixXd> jointMarginals(const std::vector<std::vector<Key>>& keySets);
 
  protected:
   /// Robust subclasses: per-factor weights for the next solve (nullptr: all ones).
   virtual const double* factorWeights() const { return nullptr; }
   NonlinearOptimizer& optimizer();
-  /// Solves with the current weights from the current estimate.
+  /// Solves with the current weights from the current estimate (kept in lastSolve_).
   OptimizerResult solveOnce();
 
   BackendOptions options_;
   FactorGraph graph_;
   Values estimate_;
   SolveSummary summary_;
+  OptimizerResult lastSolve_;
 
  private:
   void validate(const BackendUpdate& u) const;

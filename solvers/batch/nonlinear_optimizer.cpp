@@ -31,9 +31,12 @@ OptimizerMethod optimizerMethodFromName(const std::string& name) {
 
 const char* optimizerMethodName(OptimizerMethod m) {
   switch (m) {
-    case OptimizerMethod::GaussNewton: return "gn";
-    case OptimizerMethod::LevenbergMarquardt: return "lm";
-    case OptimizerMethod::Dogleg: return "dogleg";
+    case OptimizerMethod::GaussNewton:
+      return "gn";
+    case OptimizerMethod::LevenbergMarquardt:
+      return "lm";
+    case OptimizerMethod::Dogleg:
+      return "dogleg";
   }
   return "?";
 }
@@ -112,9 +115,12 @@ OptimizerResult NonlinearOptimizer::optimize(Values& values, const double* weigh
     return r;
   }
   switch (options_.method) {
-    case OptimizerMethod::GaussNewton: return runGaussNewton(values, weights);
-    case OptimizerMethod::LevenbergMarquardt: return runLevenbergMarquardt(values, weights);
-    case OptimizerMethod::Dogleg: return runDogleg(values, weights);
+    case OptimizerMethod::GaussNewton:
+      return runGaussNewton(values, weights);
+    case OptimizerMethod::LevenbergMarquardt:
+      return runLevenbergMarquardt(values, weights);
+    case OptimizerMethod::Dogleg:
+      return runDogleg(values, weights);
   }
   throw std::logic_error("unknown optimizer method");
 }
@@ -228,6 +234,7 @@ OptimizerResult NonlinearOptimizer::runLevenbergMarquardt(Values& values, const 
       }
     }
   }
+  result.finalTrustParameter = lambda;
   return finish(result, cost);
 }
 

@@ -8,8 +8,8 @@
 #include <string>
 #include <vector>
 
-#include "solvers/linear/normal_equations.h"
 #include "solvers/linear/hessian_factorization.h"
+#include "solvers/linear/normal_equations.h"
 
 namespace loopd {
 
@@ -21,17 +21,17 @@ const char* optimizerMethodName(OptimizerMethod m);
 
 struct IterationReport {
   int iteration = 0;
-  double chi2 = 0.0;        // after the step (or unchanged if rejected)
+  double chi2 = 0.0;  // after the step (or unchanged if rejected)
   double weightedCost = 0.0;
   double trustParameter = 0.0;  // λ (LM) or radius (Dogleg)
   bool accepted = true;
-  double seconds = 0.0;     // wall time of this iteration
+  double seconds = 0.0;  // wall time of this iteration
 };
 
 struct OptimizerOptions {
   OptimizerMethod method = OptimizerMethod::LevenbergMarquardt;
   int maxIterations = 100;
-  double relativeTolerance = 1e-7;  // stop when an accepted step lowers the cost by less
+  double relativeTolerance = 1e-7;   // stop when an accepted step lowers the cost by less
   double absoluteTolerance = 1e-12;  // or by less than this
   double stepTolerance = 1e-12;      // or moves every variable by less (relative to |x|+tol)
   double initialLambda = 1e-10;      // LM: damping relative to diag(H); pose graphs are
@@ -47,6 +47,7 @@ struct OptimizerResult {
   double finalChi2 = 0.0;
   double finalWeightedCost = 0.0;
   bool converged = false;
+  double finalTrustParameter = 0.0;  // LM: λ at exit (a warm start for the next solve)
   std::string stopReason;
 };
 
@@ -54,8 +55,8 @@ class NonlinearOptimizer {
  public:
   /// fixedSlots: variables held constant (e.g. the first pose for the gauge). The graph and
   /// the set of variables must not change during the optimizer's life; values may.
-  NonlinearOptimizer(const FactorGraph& graph, const Values& values,
-                     std::vector<char> fixedSlots, OptimizerOptions options = {});
+  NonlinearOptimizer(const FactorGraph& graph, const Values& values, std::vector<char> fixedSlots,
+                     OptimizerOptions options = {});
 
   /// Improves values in place. weights: per-factor (robust reweighting) or nullptr.
   OptimizerResult optimize(Values& values, const double* weights = nullptr);

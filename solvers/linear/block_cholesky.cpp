@@ -103,10 +103,14 @@ constexpr int kPanelBlock = 64;
 
 bool factorPanel(double* P, int nr, int nc) {
   switch (nc) {
-    case 2: return factorPanelFixed<2>(P, nr);
-    case 3: return factorPanelFixed<3>(P, nr);
-    case 6: return factorPanelFixed<6>(P, nr);
-    default: break;
+    case 2:
+      return factorPanelFixed<2>(P, nr);
+    case 3:
+      return factorPanelFixed<3>(P, nr);
+    case 6:
+      return factorPanelFixed<6>(P, nr);
+    default:
+      break;
   }
   for (int k = 0; k < nc; k += kPanelBlock) {
     const int bs = std::min(kPanelBlock, nc - k);
@@ -152,6 +156,36 @@ void upperSolve(const double* P, int nr, int nc, double* x) {
   }
 }
 
+// One supernode's step of the forward solve L y = v (permuted space): its own columns
+// through the diagonal block, then their products subtracted from the rows below.
+void forwardPanel(const BlockSymbolic& sym, const double* L, int s, double* v) {
+  const int c0 = sym.superCol[s], nc = sym.superCol[s + 1] - c0;
+  const int* rs = sym.rows.data() + sym.rowStart[s];
+  const int nr = sym.rowStart[s + 1] - sym.rowStart[s];
+  const double* P = L + sym.valueStart[s];
+  double* xs = v + c0;
+  lowerSolve(P, nr, nc, xs);
+  Eigen::Map<const Eigen::VectorXd> xv(xs, nc);
+  for (int i0 = nc; i0 < nr; i0 += kSolveChunk) {
+    const int m = std::min(kSolveChunk, nr - i0);
+    alignas(64) double tmp[kSolveChunk];
+    if (nc <= 8) {  // narrow (2D poses, landmarks): plain column sweeps beat GEMV setup
+      const double* Lc = P + i0;
+      for (int i = 0; i < m; ++i) tmp[i] = Lc[i] * xs[0];
+      for (int c = 1; c < nc; ++c) {
+        Lc += nr;
+        const double xc = xs[c];
+        for (int i = 0; i < m; ++i) tmp[i] += Lc[i] * xc;
+      }
+    } else {
+      Eigen::Map<Eigen::VectorXd> t(tmp, m);
+      t.noalias() = ConstMatMap(P + i0, m, nc, Stride(nr)) * xv;
+    }
+    const int* r = rs + i0;
+    for (int i = 0; i < m; ++i) v[r[i]] -= tmp[i];
+  }
+}
+
 }  // namespace
 
 void BlockCholesky::analyze(const std::vector<int>& blockOffsets,
@@ -164,6 +198,16 @@ void BlockCholesky::analyze(const std::vector<int>& blockOffsets,
   lpos_.assign(sym_.numSupernodes, 0);
   head_.assign(sym_.numSupernodes, -1);
   next_.assign(sym_.numSupernodes, -1);
+  parent_.assign(sym_.numSupernodes, -1);
+  for (int s = 0; s < sym_.numSupernodes; ++s) {
+    const int nc = sym_.superCol[s + 1] - sym_.superCol[s];
+    if (sym_.rowStart[s + 1] - sym_.rowStart[s] > nc)
+      parent_[s] = sym_.superOfCol[sym_.rows[sym_.rowStart[s] + nc]];
+  }
+  position_.assign(sym_.n, 0);
+  for (int k = 0; k < sym_.n; ++k) position_[sym_.scalarPerm.empty() ? k : sym_.scalarPerm[k]] = k;
+  work_.assign(sym_.n, 0.0);
+  rowOfSuper_.assign(sym_.numSupernodes, -1);
   analyzed_ = true;
 }
 
@@ -265,33 +309,7 @@ void BlockCholesky::solve(const double* b, double* x, int ncols) const {
       v[cyc[e - 1]] = tmp;
     }
     // Forward: L y = v.
-    for (int s = 0; s < ns; ++s) {
-      const int c0 = superCol[s], nc = superCol[s + 1] - c0;
-      const int* rs = rows + rowStart[s];
-      const int nr = rowStart[s + 1] - rowStart[s];
-      const double* P = L + valueStart[s];
-      double* xs = v + c0;
-      lowerSolve(P, nr, nc, xs);
-      Eigen::Map<const Eigen::VectorXd> xv(xs, nc);
-      for (int i0 = nc; i0 < nr; i0 += kSolveChunk) {
-        const int m = std::min(kSolveChunk, nr - i0);
-        alignas(64) double tmp[kSolveChunk];
-        if (nc <= 8) {  // narrow (2D poses, landmarks): plain column sweeps beat GEMV setup
-          const double* Lc = P + i0;
-          for (int i = 0; i < m; ++i) tmp[i] = Lc[i] * xs[0];
-          for (int c = 1; c < nc; ++c) {
-            Lc += nr;
-            const double xc = xs[c];
-            for (int i = 0; i < m; ++i) tmp[i] += Lc[i] * xc;
-          }
-        } else {
-          Eigen::Map<Eigen::VectorXd> t(tmp, m);
-          t.noalias() = ConstMatMap(P + i0, m, nc, Stride(nr)) * xv;
-        }
-        const int* r = rs + i0;
-        for (int i = 0; i < m; ++i) v[r[i]] -= tmp[i];
-      }
-    }
+    for (int s = 0; s < ns; ++s) forwardPanel(sym_, L, s, v);
     // Backward: Lᵀ x = y.
     for (int s = ns - 1; s >= 0; --s) {
       const int c0 = superCol[s], nc = superCol[s + 1] - c0;
@@ -327,6 +345,41 @@ void BlockCholesky::solve(const double* b, double* x, int ncols) const {
       v[cyc[a]] = tmp;
     }
   }
+}
+
+void BlockCholesky::inverseBlock(const std::vector<int>& scalars, double* out) const {
+  if (!factorized_)
+    throw std::logic_error("BlockCholesky::inverseBlock without a successful factorize");
+  const int m = static_cast<int>(scalars.size());
+  // The union of the columns' ancestor paths, gathered in supernode order into rows of Y.
+  std::vector<int> supers;
+  for (int j : scalars) {
+    if (j < 0 || j >= sym_.n) throw std::out_of_range("BlockCholesky::inverseBlock: scalar");
+    for (int s = sym_.superOfCol[position_[j]]; s >= 0 && rowOfSuper_[s] < 0; s = parent_[s]) {
+      rowOfSuper_[s] = 0;
+      supers.push_back(s);
+    }
+  }
+  std::sort(supers.begin(), supers.end());
+  int rows = 0;
+  for (int s : supers) {
+    rowOfSuper_[s] = rows;
+    rows += sym_.superCol[s + 1] - sym_.superCol[s];
+  }
+  Eigen::MatrixXd Y = Eigen::MatrixXd::Zero(rows, m);
+  double* v = work_.data();
+  for (int a = 0; a < m; ++a) {
+    const int p = position_[scalars[a]];
+    v[p] = 1.0;
+    for (int s = sym_.superOfCol[p]; s >= 0; s = parent_[s]) forwardPanel(sym_, L_.data(), s, v);
+    for (int s = sym_.superOfCol[p]; s >= 0; s = parent_[s])
+      for (int c = sym_.superCol[s]; c < sym_.superCol[s + 1]; ++c) {
+        Y(rowOfSuper_[s] + c - sym_.superCol[s], a) = v[c];
+        v[c] = 0.0;
+      }
+  }
+  for (int s : supers) rowOfSuper_[s] = -1;
+  Eigen::Map<Eigen::MatrixXd>(out, m, m).noalias() = Y.transpose() * Y;
 }
 
 }  // namespace loopd

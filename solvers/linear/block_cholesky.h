@@ -24,6 +24,11 @@ class BlockCholesky {
   bool factorize(const std::vector<double>& values);
   /// x = H⁻¹ b for ncols columns (n×ncols column-major). x may equal b.
   void solve(const double* b, double* x, int ncols = 1) const;
+  /// The entries of H⁻¹ at rows and columns `scalars` (original scalar indices), written
+  /// m×m column-major to out. H⁻¹ = L⁻ᵀL⁻¹ (permuted), so (H⁻¹)_ij = y_i·y_j with L y = e: each
+  /// y is non-zero only on its supernode's ancestors, so a few variables of a large graph
+  /// cost a few short forward sweeps, not full solves.
+  void inverseBlock(const std::vector<int>& scalars, double* out) const;
 
   bool analyzed() const { return analyzed_; }
   bool factorized() const { return factorized_; }
@@ -37,10 +42,14 @@ class BlockCholesky {
   BlockSymbolic sym_;
   bool analyzed_ = false;
   bool factorized_ = false;
-  std::vector<double> L_;       // panels
-  std::vector<double> update_;  // descendant-update workspace
-  std::vector<int> map_;        // relative map: scalar row → row in the current panel
+  std::vector<double> L_;                // panels
+  std::vector<double> update_;           // descendant-update workspace
+  std::vector<int> map_;                 // relative map: scalar row → row in the current panel
   std::vector<int> lpos_, head_, next_;  // left-looking descendant lists
+  std::vector<int> parent_;              // supernodal elimination tree (−1: a root)
+  std::vector<int> position_;            // original scalar → permuted
+  mutable std::vector<double> work_;     // inverseBlock: a zeroed permuted vector
+  mutable std::vector<int> rowOfSuper_;  // inverseBlock: first gathered row, −1 if unused
 };
 
 }  // namespace loopd

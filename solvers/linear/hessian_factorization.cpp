@@ -1,5 +1,7 @@
 #include "solvers/linear/hessian_factorization.h"
 
+#include <Eigen/Core>
+
 namespace loopd {
 
 HessianFactorization::HessianFactorization(FactorizationKind kind) : kind_(kind) {
@@ -24,9 +26,20 @@ void HessianFactorization::solve(const double* b, double* x, int ncols) {
     block_.solve(b, x, ncols);
 }
 
-double HessianFactorization::flops() const {
-  return cholmod_ ? cholmod_->flops() : block_.flops();
+void HessianFactorization::inverseBlock(const std::vector<int>& scalars, double* out) {
+  if (!cholmod_) {
+    block_.inverseBlock(scalars, out);
+    return;
+  }
+  const int n = cholmod_->dimension(), m = static_cast<int>(scalars.size());
+  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(n, m), X(n, m);
+  for (int a = 0; a < m; ++a) E(scalars[a], a) = 1.0;
+  cholmod_->solve(E.data(), X.data(), m);
+  for (int a = 0; a < m; ++a)
+    for (int b = 0; b < m; ++b) out[a + static_cast<long>(b) * m] = X(scalars[a], b);
 }
+
+double HessianFactorization::flops() const { return cholmod_ ? cholmod_->flops() : block_.flops(); }
 
 long HessianFactorization::factorNonZeros() const {
   return cholmod_ ? cholmod_->factorNonZeros() : block_.factorNonZeros();

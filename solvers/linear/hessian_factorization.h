@@ -20,6 +20,9 @@ class HessianFactorization {
   bool factorize(const std::vector<double>& values);
   /// x = H⁻¹b for ncols columns (column-major n×ncols).
   void solve(const double* b, double* x, int ncols = 1);
+  /// (H⁻¹) at rows and columns `scalars`, m×m column-major into out (the block factor's
+  /// ancestor-path sweeps; CHOLMOD: full solves of the unit columns).
+  void inverseBlock(const std::vector<int>& scalars, double* out);
 
   FactorizationKind kind() const { return kind_; }
   double flops() const;

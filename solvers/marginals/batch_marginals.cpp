@@ -9,7 +9,7 @@ namespace {
 struct KeyColumns {
   std::vector<int> offset;  // scalar offset in H, −1 if fixed
   std::vector<int> dim;
-  std::vector<int> start;   // first row/column in the joint matrix
+  std::vector<int> start;  // first row/column in the joint matrix
   int total = 0;
 };
 
@@ -45,22 +45,41 @@ Eigen::MatrixXd solveColumns(NonlinearOptimizer& opt, const KeyColumns& kc, size
   return X;
 }
 
+// The joint marginal of located keys on the current factorization.
+Eigen::MatrixXd jointBlock(NonlinearOptimizer& opt, const KeyColumns& kc) {
+  Eigen::MatrixXd joint = Eigen::MatrixXd::Zero(kc.total, kc.total);
+  std::vector<int> scalars, at;  // free scalars and their rows in joint
+  for (size_t i = 0; i < kc.offset.size(); ++i)
+    if (kc.offset[i] >= 0)
+      for (int d = 0; d < kc.dim[i]; ++d) {
+        scalars.push_back(kc.offset[i] + d);
+        at.push_back(kc.start[i] + d);
+      }
+  if (scalars.empty()) return joint;
+  const int m = static_cast<int>(scalars.size());
+  Eigen::MatrixXd inv(m, m);
+  opt.cholesky().inverseBlock(scalars, inv.data());
+  for (int a = 0; a < m; ++a)
+    for (int b = 0; b < m; ++b) joint(at[a], at[b]) = inv(a, b);
+  return joint;
+}
+
 }  // namespace
 
 Eigen::MatrixXd jointMarginal(NonlinearOptimizer& opt, const Values& values,
                               const std::vector<Key>& keys, const double* weights) {
-  const KeyColumns kc = locate(opt, values, keys);
+  return jointMarginals(opt, values, {keys}, weights).front();
+}
+
+std::vector<Eigen::MatrixXd> jointMarginals(NonlinearOptimizer& opt, const Values& values,
+                                            const std::vector<std::vector<Key>>& keySets,
+                                            const double* weights) {
+  std::vector<KeyColumns> located;
+  for (const auto& keys : keySets) located.push_back(locate(opt, values, keys));
   factorOrThrow(opt, values, weights);
-  Eigen::MatrixXd joint = Eigen::MatrixXd::Zero(kc.total, kc.total);
-  if (opt.layout().dimension() == 0 || kc.total == 0) return joint;
-  const Eigen::MatrixXd X = solveColumns(opt, kc, 0, keys.size(), kc.total);
-  for (size_t r = 0; r < keys.size(); ++r) {
-    if (kc.offset[r] < 0) continue;
-    joint.middleRows(kc.start[r], kc.dim[r]) = X.middleRows(kc.offset[r], kc.dim[r]);
-  }
-  for (size_t c = 0; c < keys.size(); ++c)
-    if (kc.offset[c] < 0) joint.middleCols(kc.start[c], kc.dim[c]).setZero();
-  return joint;
+  std::vector<Eigen::MatrixXd> out;
+  for (const KeyColumns& kc : located) out.push_back(jointBlock(opt, kc));
+  return out;
 }
 
 std::vector<Eigen::MatrixXd> individualMarginals(NonlinearOptimizer& opt, const Values& values,

@@ -1,6 +1,7 @@
 #pragma once
-// Marginal covariances from a batch solution: factor H once at the estimate, then solve for
-// the columns of the wanted keys (in chunks, so all poses of a large graph fit in memory).
+// Marginal covariances from a batch solution: factor H once at the estimate, then read the
+// joint blocks of the wanted keys off the factor (jointMarginal(s)) or solve for their columns
+// in chunks (individualMarginals, so all poses of a large graph fit in memory).
 #include <Eigen/Core>
 #include <vector>
 
@@ -13,10 +14,15 @@ namespace loopd {
 Eigen::MatrixXd jointMarginal(NonlinearOptimizer& optimizer, const Values& values,
                               const std::vector<Key>& keys, const double* weights = nullptr);
 
+/// The joint marginal of each key set, all on one factorization at values (each set's entries
+/// read off the factor along its variables' elimination-tree paths: cheap for small sets).
+std::vector<Eigen::MatrixXd> jointMarginals(NonlinearOptimizer& optimizer, const Values& values,
+                                            const std::vector<std::vector<Key>>& keySets,
+                                            const double* weights = nullptr);
+
 /// Each key's own marginal (block diagonal of the joint), computed chunk by chunk.
 std::vector<Eigen::MatrixXd> individualMarginals(NonlinearOptimizer& optimizer,
-                                                 const Values& values,
-                                                 const std::vector<Key>& keys,
+                                                 const Values& values, const std::vector<Key>& keys,
                                                  const double* weights = nullptr);
 
 }  // namespace loopd

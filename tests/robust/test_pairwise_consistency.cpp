@@ -12,18 +12,13 @@
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
 #include "solvers/geometry/so3.h"
+#include "tests/robust/square_walk.h"
 
 namespace loopd {
 namespace {
 
-constexpr int kLap = 40;  // poses per lap of the square (10 a side)
-
-// Pose i of the square walk: 1 m steps, a quarter turn at each corner.
-SE2 walk(int i) {
-  SE2 x;
-  for (int k = 0; k < i; ++k) x = x * SE2(1.0, 0.0, (k + 1) % 10 == 0 ? M_PI / 2 : 0.0);
-  return x;
-}
+using square::kLap;
+using square::walk;
 
 SE3 lift(const SE2& x) { return SE3(expSO3(Vec3(0, 0, x.theta)), Vec3(x.x, x.y, 0.0)); }
 

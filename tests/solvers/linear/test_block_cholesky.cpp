@@ -1,6 +1,7 @@
-// BlockCholesky against a dense Eigen LLT on random block-sparse SPD matrices (mixed block
-// sizes 1..6, orders with and without postorder changes, narrow and wide supernodes), and
-// against SparseCholesky (CHOLMOD) on real pose-graph Hessians.
+// BlockCholesky (solves and entries of the inverse) against a dense Eigen LLT on random
+// block-sparse SPD matrices (mixed block sizes 1..6, orders with and without postorder
+// changes, narrow and wide supernodes), and against SparseCholesky (CHOLMOD) on real
+// pose-graph Hessians.
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
@@ -127,6 +128,19 @@ void expectMatchesDense(const BlockMatrix& m) {
   MatrixXd inPlace = B;  // x may alias b
   chol.solve(inPlace.data(), inPlace.data(), 4);
   EXPECT_LT(relativeError(inPlace, ref), 1e-10);
+
+  // Entries of H⁻¹ at chosen scalars (any order), twice: the workspace must come back clean.
+  const MatrixXd inverse = llt.solve(MatrixXd::Identity(n, n));
+  for (int pick = 0; pick < 2; ++pick) {
+    std::vector<int> scalars;
+    for (int k = n - 1 - pick; k >= 0; k -= 1 + pick * 2 + k % 3) scalars.push_back(k);
+    const int ms = static_cast<int>(scalars.size());
+    MatrixXd got(ms, ms), want(ms, ms);
+    chol.inverseBlock(scalars, got.data());
+    for (int a = 0; a < ms; ++a)
+      for (int b = 0; b < ms; ++b) want(a, b) = inverse(scalars[a], scalars[b]);
+    EXPECT_LT(relativeError(got, want), 1e-10) << "pick " << pick;
+  }
 
   // Refactorization on the same analysis with different values.
   BlockMatrix scaled = m;
@@ -281,6 +295,17 @@ TEST_P(DatasetHessian, MatchesCholmod) {
   VectorXd x(n);
   block.solve(B.data(), x.data());
   EXPECT_LT((x - X.col(0)).norm(), 1e-14 * X.col(0).norm());  // one column = the same arithmetic
+
+  // A few entries of H⁻¹ (a closure's two ends and a far pose) against CHOLMOD's unit solves.
+  const std::vector<int> scalars = {0, 1, n / 2, n / 2 + 1, n - 1};
+  const int ms = static_cast<int>(scalars.size());
+  MatrixXd E = MatrixXd::Zero(n, ms), columns(n, ms), got(ms, ms), want(ms, ms);
+  for (int a = 0; a < ms; ++a) E(scalars[a], a) = 1.0;
+  cholmod.solve(E.data(), columns.data(), ms);
+  block.inverseBlock(scalars, got.data());
+  for (int a = 0; a < ms; ++a)
+    for (int b = 0; b < ms; ++b) want(a, b) = columns(scalars[a], b);
+  EXPECT_LT((got - want).norm(), (GetParam().wellConditioned ? 1e-9 : 1e-5) * want.norm());
 }
 
 INSTANTIATE_TEST_SUITE_P(Datasets, DatasetHessian,
