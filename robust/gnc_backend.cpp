@@ -439,6 +439,8 @@ void GncBackend::optimize() {
     if ((rounds > 0 || tightened) && gnc_.readmit)
       readmitAtTail(rounds > 0 ? firstGate : std::numeric_limits<double>::infinity());
   }
+  // The clusters, the drop check and the final gate are for TLS's 0/1 decisions.
+  const bool tls = gnc_.loss == GncLoss::TruncatedLeastSquares;
   // Sets the weights of `factors` to `weight`, re-solves, decides against the gate, and keeps
   // the result if the truncated cost dropped (else goes back). Logs what happened as `what`.
   auto tryDecisions = [&](const std::vector<int>& factors, double weight, const char* what,
@@ -473,7 +475,7 @@ void GncBackend::optimize() {
       if (cbar[i] > 0.0 && weights_[i] < 0.5) rejectedOnes.push_back(i);
     std::vector<std::vector<int>> groups;
     for (int i : rejectedOnes) groups.push_back({i});
-    for (auto& c : closureClusters(graph_, estimate_, rejectedOnes, gnc_.admitWindow))
+    for (auto& c : closureClusters(graph_, estimate_, rejectedOnes, tls ? gnc_.admitWindow : -1))
       if (c.size() > 1 && static_cast<int>(c.size()) <= gnc_.maxCluster)
         groups.push_back(std::move(c));
     const std::vector<double> rise =
@@ -526,7 +528,7 @@ void GncBackend::optimize() {
   auto runChecks = [&](int cap) {
     for (int round = 0; round < gnc_.checkRounds; ++round) {
       const bool admitted = gnc_.recheckRejected && admitFitting(cap);
-      const bool dropped = gnc_.dropClusters && dropBending(cap);
+      const bool dropped = tls && gnc_.dropClusters && dropBending(cap);
       if (!admitted && !dropped) break;
     }
   };
@@ -624,7 +626,8 @@ void GncBackend::optimize() {
   // and the settled one's closures say it is over twice too wide (intel, 1000 in groups: the
   // consistent-set start kept, the median 10x below the first one's), decide again against
   // it (re-admitting the tail as above) and re-run the checks.
-  for (int round = 0; gnc_.regateAtEnd && noiseAware && round < gnc_.maxGateRounds; ++round) {
+  for (int round = 0; tls && gnc_.regateAtEnd && noiseAware && round < gnc_.maxGateRounds;
+       ++round) {
     if (!shrinkGate()) break;
     gated = true;
     refine(0);

@@ -284,6 +284,8 @@ TEST(GncOdometryStart, EscapesTheMinimumGroupsBendTheStartInto) {
     // Without the odometry start, the gate's own rerun (candidate B) would step in; the
     // plain GNC from the least-squares start is what is shown failing.
     if (!odometryStart) g.tailExponent = -1.0;
+    // Nor the final checks, which now get out of that minimum too.
+    if (!odometryStart) g.recheckRejected = g.dropClusters = false;
     return solveGnc(g, data, ref,
                     std::string("intel group 100, odometry start ") + (odometryStart ? "1" : "0"));
   };
@@ -304,6 +306,8 @@ TEST(GncConsistentStart, EscapesWhereConsistentGroupsBendEveryStart) {
   auto solveWith = [&](bool consistentStart) {
     GncOptions g;
     g.consistentStart = consistentStart;
+    // The final checks would get out too (GncChecks): off, to show the candidate's own part.
+    if (!consistentStart) g.recheckRejected = g.dropClusters = false;
     return solveGnc(
         g, data, ref,
         std::string("intel group 1000, consistent start ") + (consistentStart ? "1" : "0"));
@@ -325,8 +329,8 @@ TEST(GncChecks, GetOutOfTheMinimumAGroupHoldsTheMapIn) {
   auto solveWith = [&](bool checks) {
     GncOptions g;
     g.recheckRejected = g.dropClusters = checks;
-    return solveGnc(g, data, ref, std::string("manhattan group 100 s4, checks ") +
-                                      (checks ? "1" : "0"));
+    return solveGnc(g, data, ref,
+                    std::string("manhattan group 100 s4, checks ") + (checks ? "1" : "0"));
   };
   const RunResult without = solveWith(false);
   EXPECT_LT(std::min(without.scores.recall, without.scores.precision), 0.99)
@@ -350,8 +354,8 @@ TEST(GncChecks, RegateFromTheFinalSolution) {
   auto solveWith = [&](bool regate) {
     GncOptions g;
     g.regateAtEnd = regate;
-    return solveGnc(g, data, ref, std::string("intel group 1000 s3, final gate ") +
-                                      (regate ? "1" : "0"));
+    return solveGnc(g, data, ref,
+                    std::string("intel group 1000 s3, final gate ") + (regate ? "1" : "0"));
   };
   const RunResult without = solveWith(false);
   EXPECT_LT(without.scores.recall, 0.99) << "the first gate no longer lets wrong closures fit";
