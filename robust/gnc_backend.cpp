@@ -462,6 +462,25 @@ void GncBackend::optimize() {
   const JointMarginalsFn jointMarginal = [this](const std::vector<std::vector<Key>>& sets) {
     return jointMarginals(sets);
   };
+  // The uncertain factors the current weights accept (or reject).
+  auto uncertainWhere = [&](bool accepted) {
+    std::vector<int> out;
+    for (int i = 0; i < n; ++i)
+      if (cbar[i] > 0.0 && (weights_[i] >= 0.5) == accepted) out.push_back(i);
+    return out;
+  };
+  // The predicted change of the truncated cost per group (NaN: unknown): admitting a rejected
+  // group trades its gate terms for the cost rise, rejecting an accepted one trades the cost
+  // drop for its gate terms. Negative: worth trying.
+  auto predictedNet = [&](const std::vector<std::vector<int>>& groups, GroupChange change) {
+    std::vector<double> net = predictedCostChange(graph_, estimate_, groups, change, jointMarginal);
+    for (size_t g = 0; g < groups.size(); ++g) {
+      double gates = 0.0;
+      for (int i : groups[g]) gates += gate[i];
+      net[g] = change == GroupChange::Add ? net[g] - gates : gates - net[g];
+    }
+    return net;
+  };
   // Re-check of the rejected closures against the map's own uncertainty: accepting a closure
   // (or a cluster) G raises the cost by about rᵀ(I + JΣJᵀ)⁻¹r (robust/closure_leverage.h)
   // instead of Σ_G gate_i. Those for which that is a net drop are accepted together, kept if
@@ -470,23 +489,18 @@ void GncBackend::optimize() {
   // too stiff for one true closure to pull back.
   auto admitFitting = [&](int cap) {
     c2 = gate;
-    std::vector<int> rejectedOnes;
-    for (int i = 0; i < n; ++i)
-      if (cbar[i] > 0.0 && weights_[i] < 0.5) rejectedOnes.push_back(i);
+    const std::vector<int> rejectedOnes = uncertainWhere(false);
     std::vector<std::vector<int>> groups;
     for (int i : rejectedOnes) groups.push_back({i});
-    for (auto& c : closureClusters(graph_, estimate_, rejectedOnes, tls ? gnc_.admitWindow : -1))
-      if (c.size() > 1 && static_cast<int>(c.size()) <= gnc_.maxCluster)
-        groups.push_back(std::move(c));
-    const std::vector<double> rise =
-        predictedCostChange(graph_, estimate_, groups, GroupChange::Add, jointMarginal);
+    if (tls)
+      for (auto& c : closureClusters(graph_, estimate_, rejectedOnes, gnc_.admitWindow))
+        if (c.size() > 1 && static_cast<int>(c.size()) <= gnc_.maxCluster)
+          groups.push_back(std::move(c));
+    const std::vector<double> net = predictedNet(groups, GroupChange::Add);
     std::vector<char> take(n, 0);
-    for (size_t g = 0; g < groups.size(); ++g) {
-      double net = rise[g];
-      for (int i : groups[g]) net -= gate[i];
-      if (net < 0.0)
+    for (size_t g = 0; g < groups.size(); ++g)
+      if (net[g] < 0.0)
         for (int i : groups[g]) take[i] = 1;
-    }
     std::vector<int> admit;
     for (int i : rejectedOnes)
       if (take[i]) admit.push_back(i);
@@ -499,23 +513,17 @@ void GncBackend::optimize() {
   // the most promising alone), kept if the truncated cost dropped.
   auto dropBending = [&](int cap) {
     c2 = gate;
-    std::vector<int> accepted;
-    for (int i = 0; i < n; ++i)
-      if (cbar[i] > 0.0 && weights_[i] >= 0.5) accepted.push_back(i);
     std::vector<std::vector<int>> clusters;
-    for (auto& c : closureClusters(graph_, estimate_, accepted, gnc_.dropWindow))
+    for (auto& c : closureClusters(graph_, estimate_, uncertainWhere(true), gnc_.dropWindow))
       if (static_cast<int>(c.size()) <= gnc_.maxCluster) clusters.push_back(std::move(c));
-    const std::vector<double> drop =
-        predictedCostChange(graph_, estimate_, clusters, GroupChange::Remove, jointMarginal);
+    const std::vector<double> net = predictedNet(clusters, GroupChange::Remove);
     std::vector<int> reject;
     int best = -1;
     double bestNet = 0.0;
     for (size_t c = 0; c < clusters.size(); ++c) {
-      double net = -drop[c];
-      for (int i : clusters[c]) net += gate[i];
-      if (!(net < 0.0)) continue;
+      if (!(net[c] < 0.0)) continue;
       reject.insert(reject.end(), clusters[c].begin(), clusters[c].end());
-      if (net < bestNet) bestNet = net, best = static_cast<int>(c);
+      if (net[c] < bestNet) bestNet = net[c], best = static_cast<int>(c);
     }
     if (reject.empty()) return false;
     if (tryDecisions(reject, 0.0, "drop check, accepted clusters that bend the map", cap))
@@ -581,18 +589,35 @@ void GncBackend::optimize() {
         const std::vector<double> keptGate = gate;
         gate = candidateGate;
         refine(refineCap);
+        // The same decisions at a cost lower by rounding are not a better answer (taking its
+        // gate then cut parking-garage's true tail).
+        auto sameDecisions = [&] {
+          for (int i = 0; i < n; ++i)
+            if (cbar[i] > 0.0 && (weights_[i] >= 0.5) != (kept.weights[i] >= 0.5)) return false;
+          return true;
+        };
+        // First, both at the candidate's own gate if it is tighter (judgeAtOwnGate).
+        bool tighterOwn = ownGate && gnc_.judgeAtOwnGate;
+        double keptAtOwn = kept.cost;
+        for (int i = 0; i < n; ++i)
+          if (cbar[i] > 0.0) {
+            tighterOwn = tighterOwn && candidateGate[i] * gnc_.widenFactor < keptGate[i];
+            keptAtOwn += std::min(kept.r2[i], candidateGate[i]) - std::min(kept.r2[i], keptGate[i]);
+          }
+        const double atOwn = tlsCost();
+        const bool winsAtOwn = tighterOwn && atOwn < keptAtOwn && !sameDecisions();
+        if (winsAtOwn) {
+          std::snprintf(buf, sizeof buf, "; at its own gate %.3g x chi2_dim(0.5): %.6g vs %.6g",
+                        candidateTail, atOwn, keptAtOwn);
+          log += buf;
+        }
         gate = keptGate;  // both judged by the same truncated cost
         c2 = gate;
         // A set of mutually consistent wrong closures (groups) can join the true ones: the
         // checks can still drop them before the candidate is judged.
-        if (!(tlsCost() < kept.cost)) runChecks(refineCap);
+        if (!winsAtOwn && !(tlsCost() < kept.cost)) runChecks(refineCap);
         const double after = tlsCost();
-        // The same decisions at a cost lower by rounding are not a better answer (taking its
-        // gate then cut parking-garage's true tail).
-        bool same = true;
-        for (int i = 0; i < n && same; ++i)
-          if (cbar[i] > 0.0) same = (weights_[i] >= 0.5) == (kept.weights[i] >= 0.5);
-        const bool keep = after < kept.cost && !same;
+        const bool keep = winsAtOwn || (after < kept.cost && !sameDecisions());
         if (keep && ownGate) {
           gate = candidateGate;
           scale_ = candidateScale, tailGate_ = candidateTail;

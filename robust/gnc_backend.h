@@ -56,6 +56,11 @@ struct GncOptions {
   /// closures (robust/pairwise_consistency.h) and keep it if its truncated cost is lower
   /// (TLS only: the candidate is decided 0/1; needs the odometry start).
   bool consistentStart = true;
+  /// If the consistent-set candidate's own gate is tighter (by widenFactor, for every
+  /// closure) than the kept solution's, judge both at it first: a kept solution bent by
+  /// consistent groups has a wide gate estimated from its own bent tail, under which bending
+  /// is cheap (parking-garage with 1000 wrong closures in groups of 10, seeds 3 and 4).
+  bool judgeAtOwnGate = true;
   double consistencyProbability = 0.999;
   /// Noise-aware gate (off when BackendOptions::robustParameter > 0 or tailExponent < 0).
   /// Loop-closure information is rarely calibrated: intel's true closures sit at

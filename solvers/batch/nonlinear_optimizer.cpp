@@ -64,7 +64,8 @@ NonlinearOptimizer::NonlinearOptimizer(const FactorGraph& graph, const Values& v
                                        std::vector<char> fixedSlots, OptimizerOptions options)
     : graph_(graph),
       options_(std::move(options)),
-      layout_(graph, values, fixedSlots),
+      fixedSlots_(std::move(fixedSlots)),
+      layout_(graph, values, fixedSlots_),
       bufferA_(layout_),
       bufferB_(layout_),
       cholesky_(options_.factorization) {
@@ -101,12 +102,37 @@ bool NonlinearOptimizer::remainingDecreaseNegligible(double cost, std::vector<do
   return expected >= 0.0 && expected <= options_.relativeTolerance * cost;
 }
 
+void NonlinearOptimizer::fitPattern(const Values& values, const double* weights) {
+  const int n = graph_.size();
+  const std::vector<char>& held = layout_.activeFactors();
+  bool same = true;
+  if (!weights) {
+    same = held.empty();
+  } else if (held.empty()) {
+    for (int f = 0; f < n && same; ++f) same = weights[f] != 0.0;
+  } else {
+    for (int f = 0; f < n && same; ++f) same = (weights[f] != 0.0) == (held[f] != 0);
+  }
+  if (same) return;
+  std::vector<char> active;
+  if (weights) {
+    active.resize(n);
+    for (int f = 0; f < n; ++f) active[f] = weights[f] != 0.0;
+  }
+  layout_ = HessianLayout(graph_, values, fixedSlots_, active);
+  bufferA_.fitLayout();
+  bufferB_.fitLayout();
+  cholesky_.analyze(layout_);
+}
+
 bool NonlinearOptimizer::factorizeAt(const Values& values, const double* weights) {
+  fitPattern(values, weights);
   current_->build(graph_, values, weights);
   return cholesky_.factorize(current_->hessian());
 }
 
 OptimizerResult NonlinearOptimizer::optimize(Values& values, const double* weights) {
+  fitPattern(values, weights);
   if (layout_.dimension() == 0) {
     OptimizerResult r;
     r.initialChi2 = r.finalChi2 = current_->cost(graph_, values, weights).chi2;

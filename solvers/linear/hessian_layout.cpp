@@ -27,9 +27,13 @@ std::vector<int> blockOrdering(int n, const std::vector<std::vector<int>>& adjac
 }  // namespace
 
 HessianLayout::HessianLayout(const FactorGraph& graph, const Values& values,
-                             const std::vector<char>& fixedSlots) {
+                             const std::vector<char>& fixedSlots,
+                             const std::vector<char>& activeFactors)
+    : activeFactors_(activeFactors) {
   const int numSlots = values.size();
   const int numFactors = graph.size();
+  if (!activeFactors.empty() && static_cast<int>(activeFactors.size()) != numFactors)
+    throw std::invalid_argument("HessianLayout: one active flag per factor expected");
 
   // Resolve keys to slots and number the active (non-fixed) variables.
   factorSlots_.assign(static_cast<size_t>(numFactors) * kMaxFactorKeys, -1);
@@ -54,6 +58,7 @@ HessianLayout::HessianLayout(const FactorGraph& graph, const Values& values,
                                     keyToString(factor.key(k)));
       factorSlots_[f * kMaxFactorKeys + k] = s;
     }
+    if (!activeFactors.empty() && !activeFactors[f]) continue;
     for (int a = 0; a < factor.size(); ++a)
       for (int b = 0; b < factor.size(); ++b) {
         const int va = active[factorSlots_[f * kMaxFactorKeys + a]];
@@ -120,6 +125,7 @@ HessianLayout::HessianLayout(const FactorGraph& graph, const Values& values,
   // Where each factor's block products land.
   blockStart_.assign(static_cast<size_t>(numFactors) * kPairs, -1);
   for (int f = 0; f < numFactors; ++f) {
+    if (!activeFactors.empty() && !activeFactors[f]) continue;
     const int nk = graph[f]->size();
     for (int a = 0; a < nk; ++a)
       for (int b = 0; b < nk; ++b) {

@@ -12,10 +12,14 @@ namespace loopd {
 class HessianLayout {
  public:
   /// fixedSlots[s] true: variable s is held constant (gauge) and has no columns.
+  /// activeFactors (empty: all): factors whose products have a place in H; the others' keys
+  /// are still resolved (their χ² can be evaluated) but they add no entries, so they must be
+  /// built with weight 0.
   /// Throws std::invalid_argument if a factor refers to a key missing from values.
-  HessianLayout(const FactorGraph& graph, const Values& values, const std::vector<char>& fixedSlots);
+  HessianLayout(const FactorGraph& graph, const Values& values, const std::vector<char>& fixedSlots,
+                const std::vector<char>& activeFactors = {});
 
-  int dimension() const { return dimension_; }            // scalar unknowns
+  int dimension() const { return dimension_; }  // scalar unknowns
   long nonZeros() const { return static_cast<long>(rowIndex_.size()); }
   const std::vector<int>& columnStart() const { return columnStart_; }  // n+1 entries
   const std::vector<int>& rowIndex() const { return rowIndex_; }
@@ -34,6 +38,10 @@ class HessianLayout {
   /// Entries per column of a slot's variable (all its columns have the same length, since
   /// diagonal blocks are stored whole; CHOLMOD ignores their lower part).
   int columnLength(int slot) const { return columnLength_[slot]; }
+  /// Whether factor f has a place in H (see the constructor).
+  bool isActive(int f) const { return activeFactors_.empty() || activeFactors_[f]; }
+  /// The constructor's activeFactors (empty: all).
+  const std::vector<char>& activeFactors() const { return activeFactors_; }
   /// Positions of the diagonal entries of H in the CSC value array.
   const std::vector<int>& diagonalPositions() const { return diagonal_; }
 
@@ -48,6 +56,7 @@ class HessianLayout {
   std::vector<int> diagonal_;
   std::vector<int> columnLength_;
   std::vector<int> blockOffsets_;
+  std::vector<char> activeFactors_;
 };
 
 }  // namespace loopd

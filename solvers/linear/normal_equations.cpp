@@ -1,11 +1,18 @@
 #include "solvers/linear/normal_equations.h"
 
 #include <algorithm>
+#include <stdexcept>
+#include <string>
 
 namespace loopd {
 
 NormalEquations::NormalEquations(const HessianLayout& layout)
     : layout_(layout), hessian_(layout.nonZeros(), 0.0), gradient_(layout.dimension(), 0.0) {}
+
+void NormalEquations::fitLayout() {
+  hessian_.assign(layout_.nonZeros(), 0.0);
+  gradient_.assign(layout_.dimension(), 0.0);
+}
 
 namespace {
 
@@ -24,8 +31,8 @@ bool uniformDim(const Factor& factor, int dim) {
 // H_ab += w·J_aᵀJ_b and g_a += w·J_aᵀr with fixed-size products (pose graphs: all blocks
 // 3×3 in 2D, 6×6 in 3D). Column cb of block (a, b) is contiguous over a's rows.
 template <int D, int V>
-void accumulateFixed(const HessianLayout& layout, int f, int nk, double* const* J,
-                     const double* r, double w, double* H, double* g) {
+void accumulateFixed(const HessianLayout& layout, int f, int nk, double* const* J, const double* r,
+                     double w, double* H, double* g) {
   using JMat = Eigen::Matrix<double, D, V>;
   const Eigen::Map<const Eigen::Matrix<double, D, 1>> res(r);
   for (int a = 0; a < nk; ++a) {
@@ -46,8 +53,8 @@ void accumulateFixed(const HessianLayout& layout, int f, int nk, double* const* 
 }
 
 // The same for any mix of block sizes (landmarks, switch variables, …).
-void accumulateGeneric(const HessianLayout& layout, const Factor& factor, int f,
-                       double* const* J, const double* r, double w, double* H, double* g) {
+void accumulateGeneric(const HessianLayout& layout, const Factor& factor, int f, double* const* J,
+                       const double* r, double w, double* H, double* g) {
   const int nk = factor.size(), d = factor.dim();
   for (int a = 0; a < nk; ++a) {
     const int oa = layout.slotOffset()[layout.factorSlot(f, a)];
@@ -103,6 +110,9 @@ LinearizationCost NormalEquations::build(const FactorGraph& graph, const Values&
     cost.chi2 += e2;
     cost.weighted += w * e2;
     if (w == 0.0) continue;
+    if (!layout_.isActive(f))
+      throw std::logic_error("NormalEquations: factor " + std::to_string(f) +
+                             " has a weight but no place in the layout");
 
     if (d == 3 && uniformDim(factor, 3)) {
       accumulateFixed<3, 3>(layout_, f, nk, J, r, w, hessian_.data(), gradient_.data());

@@ -15,13 +15,16 @@ struct LinearizationCost {
 class NormalEquations {
  public:
   explicit NormalEquations(const HessianLayout& layout);
+  /// Resizes the buffers to the layout after it was rebuilt in place.
+  void fitLayout();
 
-  /// weights: one per factor (robust reweighting) or nullptr for all ones.
+  /// weights: one per factor (robust reweighting) or nullptr for all ones. Factors the layout
+  /// leaves out must have weight 0 (std::logic_error otherwise).
   LinearizationCost build(const FactorGraph& graph, const Values& values,
                           const double* weights = nullptr);
 
   const HessianLayout& layout() const { return layout_; }
-  std::vector<double>& hessian() { return hessian_; }        // CSC values (layout pattern)
+  std::vector<double>& hessian() { return hessian_; }  // CSC values (layout pattern)
   const std::vector<double>& hessian() const { return hessian_; }
   const std::vector<double>& gradient() const { return gradient_; }  // Jᵀr
 

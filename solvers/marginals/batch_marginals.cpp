@@ -74,9 +74,10 @@ Eigen::MatrixXd jointMarginal(NonlinearOptimizer& opt, const Values& values,
 std::vector<Eigen::MatrixXd> jointMarginals(NonlinearOptimizer& opt, const Values& values,
                                             const std::vector<std::vector<Key>>& keySets,
                                             const double* weights) {
+  // Factorize first: the layout (and so the offsets) follows the weights (fitPattern).
+  factorOrThrow(opt, values, weights);
   std::vector<KeyColumns> located;
   for (const auto& keys : keySets) located.push_back(locate(opt, values, keys));
-  factorOrThrow(opt, values, weights);
   std::vector<Eigen::MatrixXd> out;
   for (const KeyColumns& kc : located) out.push_back(jointBlock(opt, kc));
   return out;
@@ -85,8 +86,8 @@ std::vector<Eigen::MatrixXd> jointMarginals(NonlinearOptimizer& opt, const Value
 std::vector<Eigen::MatrixXd> individualMarginals(NonlinearOptimizer& opt, const Values& values,
                                                  const std::vector<Key>& keys,
                                                  const double* weights) {
-  const KeyColumns kc = locate(opt, values, keys);
   factorOrThrow(opt, values, weights);
+  const KeyColumns kc = locate(opt, values, keys);
   std::vector<Eigen::MatrixXd> out(keys.size());
   constexpr size_t kChunkKeys = 64;
   for (size_t first = 0; first < keys.size(); first += kChunkKeys) {
