@@ -497,9 +497,20 @@ void GncBackend::optimize() {
         if (c.size() > 1 && static_cast<int>(c.size()) <= gnc_.maxCluster)
           groups.push_back(std::move(c));
     const std::vector<double> net = predictedNet(groups, GroupChange::Add);
+    // The rise (net + the group's gates) within the noise (admitWithinNoise).
+    const bool noiseBound = tls && gnc_.admitWithinNoise && noiseAware && scale_ > 0.0;
+    auto withinNoise = [&](const std::vector<int>& group, double groupNet) {
+      if (!noiseBound) return true;
+      double rise = groupNet, bound = 0.0;
+      for (int i : group) {
+        rise += gate[i];
+        bound += gnc_.medianFactor * scale_ * chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
+      }
+      return rise <= bound;
+    };
     std::vector<char> take(n, 0);
     for (size_t g = 0; g < groups.size(); ++g)
-      if (net[g] < 0.0)
+      if (net[g] < 0.0 && withinNoise(groups[g], net[g]))
         for (int i : groups[g]) take[i] = 1;
     std::vector<int> admit;
     for (int i : rejectedOnes)
