@@ -104,20 +104,14 @@ bool NonlinearOptimizer::remainingDecreaseNegligible(double cost, std::vector<do
 
 void NonlinearOptimizer::fitPattern(const Values& values, const double* weights) {
   const int n = graph_.size();
-  const std::vector<char>& held = layout_.activeFactors();
+  auto wanted = [&](int f) { return !weights || weights[f] != 0.0; };
   bool same = true;
-  if (!weights) {
-    same = held.empty();
-  } else if (held.empty()) {
-    for (int f = 0; f < n && same; ++f) same = weights[f] != 0.0;
-  } else {
-    for (int f = 0; f < n && same; ++f) same = (weights[f] != 0.0) == (held[f] != 0);
-  }
+  for (int f = 0; f < n && same; ++f) same = wanted(f) == layout_.isActive(f);
   if (same) return;
-  std::vector<char> active;
+  std::vector<char> active;  // empty: every factor
   if (weights) {
     active.resize(n);
-    for (int f = 0; f < n; ++f) active[f] = weights[f] != 0.0;
+    for (int f = 0; f < n; ++f) active[f] = wanted(f);
   }
   layout_ = HessianLayout(graph_, values, fixedSlots_, active);
   bufferA_.fitLayout();

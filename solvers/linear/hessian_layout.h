@@ -40,8 +40,6 @@ class HessianLayout {
   int columnLength(int slot) const { return columnLength_[slot]; }
   /// Whether factor f has a place in H (see the constructor).
   bool isActive(int f) const { return activeFactors_.empty() || activeFactors_[f]; }
-  /// The constructor's activeFactors (empty: all).
-  const std::vector<char>& activeFactors() const { return activeFactors_; }
   /// Positions of the diagonal entries of H in the CSC value array.
   const std::vector<int>& diagonalPositions() const { return diagonal_; }
 
