@@ -142,6 +142,8 @@ class GncBackend : public BatchBackend {
   }
 
  private:
+  class Run;  // one optimize() call (robust/gnc_run.h)
+
   double barc2(const Factor& f) const;
   /// The trusted factors' linear initialization from the lowest pose (the odometry start);
   /// empty without a pose or a trusted factor. alsoUse: per factor, uncertain ones to use too.

@@ -347,7 +347,7 @@ void BlockCholesky::solve(const double* b, double* x, int ncols) const {
   }
 }
 
-void BlockCholesky::inverseBlock(const std::vector<int>& scalars, double* out) const {
+void BlockCholesky::inverseBlock(const std::vector<int>& scalars, double* out) {
   if (!factorized_)
     throw std::logic_error("BlockCholesky::inverseBlock without a successful factorize");
   const int m = static_cast<int>(scalars.size());

@@ -27,8 +27,9 @@ class BlockCholesky {
   /// The entries of H⁻¹ at rows and columns `scalars` (original scalar indices), written
   /// m×m column-major to out. H⁻¹ = L⁻ᵀL⁻¹ (permuted), so (H⁻¹)_ij = y_i·y_j with L y = e: each
   /// y is non-zero only on its supernode's ancestors, so a few variables of a large graph
-  /// cost a few short forward sweeps, not full solves.
-  void inverseBlock(const std::vector<int>& scalars, double* out) const;
+  /// cost a few short forward sweeps, not full solves. Not const: it uses the object's own
+  /// workspaces (no allocation per call), so concurrent calls on one factor are not safe.
+  void inverseBlock(const std::vector<int>& scalars, double* out);
 
   bool analyzed() const { return analyzed_; }
   bool factorized() const { return factorized_; }
@@ -48,8 +49,8 @@ class BlockCholesky {
   std::vector<int> lpos_, head_, next_;  // left-looking descendant lists
   std::vector<int> parent_;              // supernodal elimination tree (−1: a root)
   std::vector<int> position_;            // original scalar → permuted
-  mutable std::vector<double> work_;     // inverseBlock: a zeroed permuted vector
-  mutable std::vector<int> rowOfSuper_;  // inverseBlock: first gathered row, −1 if unused
+  std::vector<double> work_;             // inverseBlock: a zeroed permuted vector
+  std::vector<int> rowOfSuper_;          // inverseBlock: first gathered row, −1 if unused
 };
 
 }  // namespace loopd

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <map>
 #include <string>
 
@@ -250,6 +251,22 @@ void expectExact(const RunResult& r, const Reference& ref) {
   EXPECT_LE(std::abs(r.inlierChi2 - ref.optimumChi2), 1e-3 * ref.optimumChi2);
 }
 
+// The two halves of a GNC test: gnc-tls with `part` switched off, then on (part(g, on) sets
+// the options), each labelled "`what` 0" / "`what` 1".
+struct OffAndOn {
+  RunResult off, on;
+};
+OffAndOn offAndOn(const tools::OutlierResult& data, const Reference& ref, const std::string& what,
+                  const std::function<void(GncOptions&, bool)>& part) {
+  OffAndOn r;
+  for (bool on : {false, true}) {
+    GncOptions g;
+    part(g, on);
+    (on ? r.on : r.off) = solveGnc(g, data, ref, what + (on ? " 1" : " 0"));
+  }
+  return r;
+}
+
 // manhattan's loop closures are heavy-tailed (largest true χ² 31× the median, above
 // χ²₃(0.99)): a GNC with the fixed χ²_dim(0.99) threshold lands in a local minimum that drops
 // true closures (precision 0.79 on the first 1500 poses with 50 random outliers); the
@@ -258,16 +275,12 @@ void expectExact(const RunResult& r, const Reference& ref) {
 TEST(NoiseAwareGnc, KeepsManhattansHeavyTailedTrueClosures) {
   const Reference& ref = reference("manhattan.g2o:1500");
   const tools::OutlierResult data = protocolOutliers(ref, 50, OutlierMode::Random);
-  auto solveWith = [&](double tailExponent) {
-    GncOptions g;
-    g.tailExponent = tailExponent;
-    char label[64];
-    std::snprintf(label, sizeof label, "manhattan:1500 random 50, tail exponent %g", tailExponent);
-    return solveGnc(g, data, ref, label);
-  };
-  const RunResult plain = solveWith(-1.0);  // noise-aware gate off
-  EXPECT_LT(plain.scores.precision, 0.95) << "the fixed threshold no longer drops true closures";
-  expectExact(solveWith(GncOptions{}.tailExponent), ref);
+  const OffAndOn r =
+      offAndOn(data, ref, "manhattan:1500 random 50, noise-aware gate", [](GncOptions& g, bool on) {
+        if (!on) g.tailExponent = -1.0;  // the gate off
+      });
+  EXPECT_LT(r.off.scores.precision, 0.95) << "the fixed threshold no longer drops true closures";
+  expectExact(r.on, ref);
 }
 
 // Groups of mutually consistent outliers bend the all-closures least-squares start on intel
@@ -278,21 +291,17 @@ TEST(NoiseAwareGnc, KeepsManhattansHeavyTailedTrueClosures) {
 TEST(GncOdometryStart, EscapesTheMinimumGroupsBendTheStartInto) {
   const Reference& ref = reference("intel.g2o");
   const tools::OutlierResult data = protocolOutliers(ref, 100, OutlierMode::Group);
-  auto solveWith = [&](bool odometryStart) {
-    GncOptions g;
-    g.odometryStart = odometryStart;
-    // Without the odometry start, the gate's own rerun (candidate B) would step in; the
-    // plain GNC from the least-squares start is what is shown failing.
-    if (!odometryStart) g.tailExponent = -1.0;
-    // Nor the final checks, which now get out of that minimum too.
-    if (!odometryStart) g.recheckRejected = g.dropClusters = false;
-    return solveGnc(g, data, ref,
-                    std::string("intel group 100, odometry start ") + (odometryStart ? "1" : "0"));
-  };
-  const RunResult lsOnly = solveWith(false);
-  EXPECT_LT(std::min(lsOnly.scores.precision, lsOnly.scores.recall), 0.99)
+  const OffAndOn r =
+      offAndOn(data, ref, "intel group 100, odometry start", [](GncOptions& g, bool on) {
+        g.odometryStart = on;
+        // Without the odometry start, the gate's own rerun (candidate B) would step in, and
+        // the final checks now get out of that minimum too: the plain GNC from the
+        // least-squares start is what is shown failing.
+        if (!on) g.tailExponent = -1.0, g.recheckRejected = g.dropClusters = false;
+      });
+  EXPECT_LT(std::min(r.off.scores.precision, r.off.scores.recall), 0.99)
       << "the least-squares start no longer leads the GNC astray";
-  expectExact(solveWith(true), ref);
+  expectExact(r.on, ref);
 }
 
 // With 1000 outliers in groups of 10 on intel (seed 1), the groups bend the map from both the
@@ -303,18 +312,14 @@ TEST(GncOdometryStart, EscapesTheMinimumGroupsBendTheStartInto) {
 TEST(GncConsistentStart, EscapesWhereConsistentGroupsBendEveryStart) {
   const Reference& ref = reference("intel.g2o");
   const tools::OutlierResult data = protocolOutliers(ref, 1000, OutlierMode::Group);
-  auto solveWith = [&](bool consistentStart) {
-    GncOptions g;
-    g.consistentStart = consistentStart;
-    // The final checks would get out too (GncChecks): off, to show the candidate's own part.
-    if (!consistentStart) g.recheckRejected = g.dropClusters = false;
-    return solveGnc(
-        g, data, ref,
-        std::string("intel group 1000, consistent start ") + (consistentStart ? "1" : "0"));
-  };
-  const RunResult without = solveWith(false);
-  EXPECT_LT(without.scores.recall, 0.99) << "the groups no longer bend both starts";
-  expectExact(solveWith(true), ref);
+  const OffAndOn r =
+      offAndOn(data, ref, "intel group 1000, consistent start", [](GncOptions& g, bool on) {
+        g.consistentStart = on;
+        // The final checks would get out too (GncChecks): off, to show the candidate's part.
+        if (!on) g.recheckRejected = g.dropClusters = false;
+      });
+  EXPECT_LT(r.off.scores.recall, 0.99) << "the groups no longer bend both starts";
+  expectExact(r.on, ref);
 }
 
 // manhattan, 100 outliers in groups of 10, seed 4: from both starts the GNC accepts three of
@@ -326,16 +331,12 @@ TEST(GncConsistentStart, EscapesWhereConsistentGroupsBendEveryStart) {
 TEST(GncChecks, GetOutOfTheMinimumAGroupHoldsTheMapIn) {
   const Reference& ref = reference("manhattan.g2o");
   const tools::OutlierResult data = protocolOutliers(ref, 100, OutlierMode::Group, 4);
-  auto solveWith = [&](bool checks) {
-    GncOptions g;
-    g.recheckRejected = g.dropClusters = checks;
-    return solveGnc(g, data, ref,
-                    std::string("manhattan group 100 s4, checks ") + (checks ? "1" : "0"));
-  };
-  const RunResult without = solveWith(false);
-  EXPECT_LT(std::min(without.scores.recall, without.scores.precision), 0.99)
+  const OffAndOn r =
+      offAndOn(data, ref, "manhattan group 100 s4, checks",
+               [](GncOptions& g, bool on) { g.recheckRejected = g.dropClusters = on; });
+  EXPECT_LT(std::min(r.off.scores.recall, r.off.scores.precision), 0.99)
       << "the group no longer holds the map bent";
-  expectExact(solveWith(true), ref);
+  expectExact(r.on, ref);
   // The drop check alone rejects the whole group (the true closures it pushed out need the
   // re-check to come back).
   GncOptions dropOnly;
@@ -351,15 +352,10 @@ TEST(GncChecks, GetOutOfTheMinimumAGroupHoldsTheMapIn) {
 TEST(GncChecks, RegateFromTheFinalSolution) {
   const Reference& ref = reference("intel.g2o");
   const tools::OutlierResult data = protocolOutliers(ref, 1000, OutlierMode::Group, 3);
-  auto solveWith = [&](bool regate) {
-    GncOptions g;
-    g.regateAtEnd = regate;
-    return solveGnc(g, data, ref,
-                    std::string("intel group 1000 s3, final gate ") + (regate ? "1" : "0"));
-  };
-  const RunResult without = solveWith(false);
-  EXPECT_LT(without.scores.recall, 0.99) << "the first gate no longer lets wrong closures fit";
-  expectExact(solveWith(true), ref);
+  const OffAndOn r = offAndOn(data, ref, "intel group 1000 s3, final gate",
+                              [](GncOptions& g, bool on) { g.regateAtEnd = on; });
+  EXPECT_LT(r.off.scores.recall, 0.99) << "the first gate no longer lets wrong closures fit";
+  expectExact(r.on, ref);
 }
 
 // intel, 1000 local outliers, seed 2: the tail re-admission's wider gate brings no rejected
@@ -381,18 +377,15 @@ TEST(GncChecks, KeepTheTighterGateWhenTheTailBringsNothingBack) {
 TEST(GncConsistentStart, JudgedAtItsOwnTighterGate) {
   const Reference& ref = reference("parking-garage.g2o");
   const tools::OutlierResult data = protocolOutliers(ref, 1000, OutlierMode::Group, 3);
-  auto solveWith = [&](bool ownGate) {
-    GncOptions g;
-    g.judgeAtOwnGate = ownGate;
-    // The final checks cannot get out either (they only chip at the cost); off in the off
-    // half, which they would take two minutes to run.
-    if (!ownGate) g.recheckRejected = g.dropClusters = false;
-    return solveGnc(g, data, ref,
-                    std::string("parking-garage group 1000 s3, own gate ") + (ownGate ? "1" : "0"));
-  };
-  const RunResult without = solveWith(false);
-  EXPECT_LT(without.scores.recall, 0.99) << "the groups no longer bend the first solution";
-  expectExact(solveWith(true), ref);
+  const OffAndOn r =
+      offAndOn(data, ref, "parking-garage group 1000 s3, own gate", [](GncOptions& g, bool on) {
+        g.judgeAtOwnGate = on;
+        // The final checks cannot get out either (they only chip at the cost); off in the
+        // off half, which they would take two minutes to run.
+        if (!on) g.recheckRejected = g.dropClusters = false;
+      });
+  EXPECT_LT(r.off.scores.recall, 0.99) << "the groups no longer bend the first solution";
+  expectExact(r.on, ref);
 }
 
 // parking-garage, 1000 random outliers, seed 2: at the final tail gate (0.05 x chi2_dim(0.5),
@@ -403,16 +396,10 @@ TEST(GncConsistentStart, JudgedAtItsOwnTighterGate) {
 TEST(GncChecks, AdmitOnlyWithinTheNoise) {
   const Reference& ref = reference("parking-garage.g2o");
   const tools::OutlierResult data = protocolOutliers(ref, 1000, OutlierMode::Random, 2);
-  auto solveWith = [&](bool withinNoise) {
-    GncOptions g;
-    g.admitWithinNoise = withinNoise;
-    return solveGnc(
-        g, data, ref,
-        std::string("parking-garage random 1000 s2, within noise ") + (withinNoise ? "1" : "0"));
-  };
-  const RunResult without = solveWith(false);
-  EXPECT_GT(without.inlierChi2, 1.01 * ref.optimumChi2) << "no wrong closure fits at the gate";
-  expectExact(solveWith(true), ref);
+  const OffAndOn r = offAndOn(data, ref, "parking-garage random 1000 s2, within noise",
+                              [](GncOptions& g, bool on) { g.admitWithinNoise = on; });
+  EXPECT_GT(r.off.inlierChi2, 1.01 * ref.optimumChi2) << "no wrong closure fits at the gate";
+  expectExact(r.on, ref);
 }
 
 }  // namespace
