@@ -10,6 +10,7 @@ packages=(
   libspdlog-dev libgtest-dev
   libceres-dev          # optional comparison baseline for the benchmarks
   iproute2 procps
+  python3               # tools/compare (and its end-to-end test)
   chromium              # loopd-view's end-to-end test drives it headless (tests/tools/test_loopd_view)
 )
 

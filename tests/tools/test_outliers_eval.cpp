@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -20,6 +22,7 @@ namespace {
 
 const std::string kDatasets = LOOPD_DATASETS_DIR;
 const std::string kBin = LOOPD_BINARY_DIR;
+const std::string kSource = LOOPD_SOURCE_DIR;
 
 TEST(OutlierGenerator, DeterministicAppendedAndWellFormed) {
   const io::Dataset d = io::readDataset(kDatasets + "/intel.g2o");
@@ -74,10 +77,53 @@ TEST(OutlierGenerator, ThreeDimensional) {
   for (int i : a.outliers) {
     const auto& e = a.graph.edges[i];
     EXPECT_EQ(e.type, io::EdgeType::BetweenSE3);
-    const double qn = std::sqrt(e.measurement[3] * e.measurement[3] + e.measurement[4] * e.measurement[4] +
-                                e.measurement[5] * e.measurement[5] + e.measurement[6] * e.measurement[6]);
+    const double qn =
+        std::sqrt(e.measurement[3] * e.measurement[3] + e.measurement[4] * e.measurement[4] +
+                  e.measurement[5] * e.measurement[5] + e.measurement[6] * e.measurement[6]);
     EXPECT_NEAR(qn, 1.0, 1e-12);
   }
+}
+
+// --vertigo: generateDataset.py's measurements, near the identity (axes ~ N(0, 0.3 m), angles
+// ~ N(0, 10°)); the default's rotations are uniform, so the spread tells the two apart.
+TEST(OutlierGenerator, VertigoMeasurementsNearTheIdentity) {
+  auto spread = [](const OutlierResult& r, int k) {
+    double sum = 0.0, sq = 0.0;
+    for (int i : r.outliers) {
+      const double x = r.graph.edges[i].measurement[k];
+      sum += x, sq += x * x;
+    }
+    const double n = static_cast<double>(r.outliers.size()), mean = sum / n;
+    return std::sqrt(sq / n - mean * mean);
+  };
+  const io::Dataset d2 = io::readDataset(kDatasets + "/intel.g2o");
+  OutlierOptions o;
+  o.count = 4000;
+  o.measurement = OutlierMeasurement::Vertigo;
+  const OutlierResult v = addOutliers(d2, o);
+  EXPECT_NEAR(spread(v, 0), 0.3, 0.02);
+  EXPECT_NEAR(spread(v, 1), 0.3, 0.02);
+  EXPECT_NEAR(spread(v, 2), 10.0 * M_PI / 180.0, 0.01);
+  o.measurement = OutlierMeasurement::Uniform;
+  EXPECT_NEAR(spread(addOutliers(d2, o), 2), M_PI / std::sqrt(3.0), 0.1);  // uniform on ±π
+  EXPECT_NE(outlierTruthJson("x.g2o", o, v).find("\"measurement\": \"uniform\""),
+            std::string::npos);
+
+  const io::Dataset d3 = io::readDataset(kDatasets + "/smallGrid3D.g2o");
+  o.measurement = OutlierMeasurement::Vertigo;
+  const OutlierResult v3 = addOutliers(d3, o);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(spread(v3, k), 0.3, 0.02);
+  double largest = 0.0;
+  for (int i : v3.outliers) {
+    const auto& m = v3.graph.edges[i].measurement;
+    const Eigen::Quaterniond q(m[6], m[3], m[4], m[5]);
+    EXPECT_NEAR(q.norm(), 1.0, 1e-12);
+    EXPECT_GE(q.w(), 0.0);
+    largest = std::max(largest, Eigen::AngleAxisd(q).angle());
+  }
+  EXPECT_LT(largest, 90.0 * M_PI / 180.0);  // three 10° angles: never near a half turn
+  EXPECT_NE(outlierTruthJson("x.g2o", o, v3).find("\"measurement\": \"vertigo\""),
+            std::string::npos);
 }
 
 TEST(TrajectoryMetrics, AlignmentInvariantAteAndRpe) {
@@ -142,12 +188,37 @@ TEST(OutliersEvalBinaries, EndToEnd) {
   EXPECT_EQ(jsonIntArray(t, "outliers").size(), 7u);
   EXPECT_EQ(g.edges.size(), static_cast<size_t>(jsonNumber(t, "inlier_edges", 0)) + 7);
   const std::string eval = kBin + "/tools/loopd-eval --reference " + kDatasets +
-                           "/smallGrid3D.g2o --estimate " + kDatasets + "/smallGrid3D.g2o --truth " +
-                           truth + " --graph " + graph + " --json " + json + " > /dev/null";
+                           "/smallGrid3D.g2o --estimate " + kDatasets +
+                           "/smallGrid3D.g2o --truth " + truth + " --graph " + graph + " --json " +
+                           json + " > /dev/null";
   ASSERT_EQ(std::system(eval.c_str()), 0) << eval;
   const std::string e = readTextFile(json);
   EXPECT_NEAR(jsonNumber(e, "ate_rmse", -1), 0.0, 1e-9);
   EXPECT_EQ(std::system((kBin + "/tools/loopd-outliers 2>/dev/null").c_str()) != 0, true);
+}
+
+// --vertigo also takes generateDataset.py's local window (20) unless --window is given.
+TEST(OutliersEvalBinaries, VertigoLocalWindow) {
+  const std::string dir = ::testing::TempDir();
+  const std::string graph = dir + "/intel_vertigo.g2o", truth = dir + "/intel_vertigo.json";
+  auto generate = [&](const std::string& extra) {
+    const std::string gen = kBin + "/tools/loopd-outliers " + kDatasets +
+                            "/intel.g2o --count 500 --mode local --vertigo --seed 3 --out " +
+                            graph + " --truth " + truth + extra + " 2>/dev/null";
+    EXPECT_EQ(std::system(gen.c_str()), 0) << gen;
+    const io::Dataset g = io::readDataset(graph);
+    std::int64_t widest = 0;
+    for (std::int64_t i : jsonIntArray(readTextFile(truth), "outliers"))
+      widest = std::max(widest, g.edges[i].to - g.edges[i].from);
+    return widest;
+  };
+  EXPECT_EQ(generate(""), 20);
+  EXPECT_GT(generate(" --window 50"), 20);
+  EXPECT_NE(readTextFile(truth).find("\"measurement\": \"vertigo\""), std::string::npos);
+  const std::string both = kBin + "/tools/loopd-outliers " + kDatasets +
+                           "/intel.g2o --ambiguous 5 --vertigo --out " + graph + " --truth " +
+                           truth + " 2>/dev/null";
+  EXPECT_NE(std::system(both.c_str()), 0);
 }
 
 TEST(AmbiguousGenerator, GroupsHoldTheTrueEdgeAndWrongDecoys) {
@@ -201,8 +272,8 @@ TEST(OutliersEvalBinaries, AmbiguousEndToEnd) {
                     stats = dir + "/intel_amb_stats.json", est = dir + "/intel_amb_est.g2o",
                     ref = dir + "/intel_ref.g2o", json = dir + "/intel_amb_eval.json";
   const std::string gen = kBin + "/tools/loopd-outliers " + kDatasets +
-                          "/intel.g2o --ambiguous 30 --null --decoys mixed --seed 4 --out " + graph +
-                          " --truth " + truth + " 2>/dev/null";
+                          "/intel.g2o --ambiguous 30 --null --decoys mixed --seed 4 --out " +
+                          graph + " --truth " + truth + " 2>/dev/null";
   ASSERT_EQ(std::system(gen.c_str()), 0) << gen;
   const std::string solveRef = kBin + "/tools/loopd-solve " + kDatasets +
                                "/intel.g2o --solver isam2 --incremental -q --out " + ref;
@@ -225,12 +296,30 @@ TEST(OutliersEvalBinaries, AmbiguousEndToEnd) {
   EXPECT_EQ(jsonNumber(e, "recall", 0), 1.0);
   EXPECT_LT(jsonNumber(e, "ate_rmse", 1), 1e-3);
 
-  const std::string plain = kBin + "/tools/loopd-solve " + graph +
-                            " --solver isam2 --incremental -q --stats " + stats;
+  const std::string plain =
+      kBin + "/tools/loopd-solve " + graph + " --solver isam2 --incremental -q --stats " + stats;
   ASSERT_EQ(std::system(plain.c_str()), 0) << plain;
   EXPECT_EQ(jsonIntArray(readTextFile(stats), "chosen").size(), 30u);
   const std::string badK = kBin + "/tools/loopd-solve " + graph + " --max-hypotheses 0 2>/dev/null";
   EXPECT_NE(std::system(badK.c_str()), 0);
+}
+
+// tools/compare end to end on a small setting: the reference solve, the outliers (here with
+// --vertigo, recorded as mode vertigo-local), a variant's run and its scores in results.csv.
+TEST(CompareScript, VertigoRowsEndToEnd) {
+  const std::string out = ::testing::TempDir() + "/compare_vertigo";
+  const std::string cmd = "/usr/bin/python3 " + kSource + "/tools/compare --build " + kBin +
+                          " --datasets-dir " + kDatasets +
+                          " --variants gnc-tls --datasets intel.g2o --modes local --counts 20 "
+                          "--seeds 1 --vertigo --no-plots --out " +
+                          out + " > /dev/null 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream csv(out + "/results.csv");
+  std::string header, row;
+  ASSERT_TRUE(std::getline(csv, header));
+  ASSERT_TRUE(std::getline(csv, row));
+  EXPECT_EQ(row.rfind("intel,vertigo-local,20,1,gnc-tls,ok,", 0), 0u) << row;
+  EXPECT_FALSE(std::getline(csv, row)) << "one setting, one row";
 }
 
 }  // namespace

@@ -19,14 +19,17 @@ namespace {
 
 const char* kUsage =
     "usage: loopd-outliers INPUT --count N --mode random|local|group [--group-size K]\n"
-    "                      [--window W] [--local-groups] [--seed S] --out OUT.g2o\n"
+    "                      [--window W] [--local-groups] [--vertigo] [--seed S] --out OUT.g2o\n"
     "                      --truth TRUTH.json\n\n"
-    "Appends N wrong loop closures (Vertigo's protocol): random pose pairs, local pairs\n"
-    "(b - a in [2, W], default W = 50) or groups of K (default 10) consecutive pairs sharing\n"
-    "one random measurement. Measurements: uniform rotation, translation uniform up to the\n"
-    "median loop-closure length; information of the median loop closure. Deterministic per\n"
-    "seed (default 1). Writes OUT.g2o (all edges; the outliers last) and TRUTH.json\n"
-    "{input, mode, count, seed, group_size, outliers: [0-based edge indices], inlier_edges}.\n\n"
+    "Appends N wrong loop closures (ends after Vertigo's protocol): random pose pairs,\n"
+    "local pairs (b - a in [2, W], default W = 50) or groups of K (default 10) consecutive\n"
+    "pairs sharing one random measurement. Measurements: uniform rotation, translation\n"
+    "uniform up to the median loop-closure length; with --vertigo, Vertigo's own instead\n"
+    "(translation axes ~ N(0, 0.3 m), angles ~ N(0, 10 deg): near the identity) and W = 20\n"
+    "unless --window is given. Information of the median loop closure. Deterministic per\n"
+    "seed (default 1).\n"
+    "Writes OUT.g2o (all edges; the outliers last) and TRUTH.json {input, mode, count, seed,\n"
+    "group_size, measurement, outliers: [0-based edge indices], inlier_edges}.\n\n"
     "       loopd-outliers INPUT --ambiguous N [--alternatives K] [--null]\n"
     "                      [--decoys target|measurement|mixed|aliased] [--window W] [--landmarks]\n"
     "                      [--seed S] --out OUT.g2o --truth TRUTH.json\n\n"
@@ -36,7 +39,8 @@ const char* kUsage =
     "sighting, a nearby landmark already seen), or a wrong measurement (translation moved by\n"
     "0.5-2 x the median loop length, rotation by 10-45 degrees); 'aliased': a wrong\n"
     "measurement only 2-4 of the edge's own standard deviations away (whitened), which the\n"
-    "data may take long to tell apart -- the stress case for --max-hypotheses. TRUTH.json: {input, mode:\n"
+    "data may take long to tell apart -- the stress case for --max-hypotheses. TRUTH.json: {input, "
+    "mode:\n"
     "ambiguous, count, alternatives, null, decoys, seed, outliers: [decoy edge indices],\n"
     "true_choice: [per group], true_edges: [per group]}.\n";
 
@@ -83,6 +87,8 @@ int main(int argc, char** argv) {
         haveWindow = true;
       } else if (a == "--local-groups") {
         opt.localGroups = true;
+      } else if (a == "--vertigo") {
+        opt.measurement = tools::OutlierMeasurement::Vertigo;
       } else if (a == "--seed") {
         opt.seed = amb.seed =
             static_cast<std::uint64_t>(parseInt(a, value(), 0, 0x7fffffffffffffffL));
@@ -112,9 +118,13 @@ int main(int argc, char** argv) {
     if (input.empty()) throw std::invalid_argument("no input file");
     if (ambiguous && (haveCount || haveMode))
       throw std::invalid_argument("--ambiguous does not combine with --count/--mode");
+    if (ambiguous && opt.measurement == tools::OutlierMeasurement::Vertigo)
+      throw std::invalid_argument("--vertigo does not combine with --ambiguous");
     if (!ambiguous && !haveCount) throw std::invalid_argument("--count is required");
     if (!ambiguous && !haveMode) throw std::invalid_argument("--mode is required");
     if (!haveWindow) amb.window = 10;
+    if (!haveWindow && opt.measurement == tools::OutlierMeasurement::Vertigo)
+      opt.localWindow = 20;  // generateDataset.py's local window
     if (out.empty() || truth.empty()) throw std::invalid_argument("--out and --truth are required");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "loopd-outliers: %s\n\n%s", e.what(), kUsage);
@@ -126,7 +136,8 @@ int main(int argc, char** argv) {
       const tools::AmbiguousResult r = tools::makeAmbiguous(dataset, amb);
       io::writeG2oGraph(out, r.graph);
       writeTruth(truth, tools::ambiguousTruthJson(input, amb, r));
-      std::fprintf(stderr, "%s: %d loop closures made ambiguous (%d alternatives%s, %s decoys) -> %s\n",
+      std::fprintf(stderr,
+                   "%s: %d loop closures made ambiguous (%d alternatives%s, %s decoys) -> %s\n",
                    input.c_str(), amb.count, amb.alternatives, amb.null ? " + null" : "",
                    tools::decoyModeName(amb.decoys), out.c_str());
       return 0;
@@ -135,7 +146,8 @@ int main(int argc, char** argv) {
     io::writeG2oGraph(out, r.graph);
     writeTruth(truth, tools::outlierTruthJson(input, opt, r));
     std::fprintf(stderr, "%s: %d edges + %d %s outliers -> %s\n", input.c_str(), r.inlierEdges,
-                 static_cast<int>(r.outliers.size()), tools::outlierModeName(opt.mode), out.c_str());
+                 static_cast<int>(r.outliers.size()), tools::outlierModeName(opt.mode),
+                 out.c_str());
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "loopd-outliers: %s\n", e.what());

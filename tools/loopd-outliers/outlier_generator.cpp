@@ -13,9 +13,12 @@ namespace loopd::tools {
 
 const char* outlierModeName(OutlierMode m) {
   switch (m) {
-    case OutlierMode::Random: return "random";
-    case OutlierMode::Local: return "local";
-    case OutlierMode::Group: return "group";
+    case OutlierMode::Random:
+      return "random";
+    case OutlierMode::Local:
+      return "local";
+    case OutlierMode::Group:
+      return "group";
   }
   return "?";
 }
@@ -25,6 +28,58 @@ OutlierMode outlierModeFromName(const std::string& n) {
   if (n == "local") return OutlierMode::Local;
   if (n == "group") return OutlierMode::Group;
   throw std::invalid_argument("--mode takes random, local or group, got '" + n + "'");
+}
+
+namespace {
+
+// Rotation uniform, translation of uniform direction and length uniform in [0, L].
+std::array<double, 7> uniformMeasurement(Rng& rng, bool is3d, double L) {
+  std::array<double, 7> m{};
+  const double len = rng.uniform(0.0, L);
+  if (!is3d) {
+    const double dir = rng.uniform(-M_PI, M_PI);
+    m[0] = len * std::cos(dir);
+    m[1] = len * std::sin(dir);
+    m[2] = rng.uniform(-M_PI, M_PI);
+    return m;
+  }
+  Eigen::Vector3d d(rng.normal(), rng.normal(), rng.normal());
+  if (d.norm() < 1e-12) d = Eigen::Vector3d::UnitX();
+  d = d.normalized() * len;
+  Eigen::Vector4d q(rng.normal(), rng.normal(), rng.normal(), rng.normal());
+  if (q.norm() < 1e-12) q = Eigen::Vector4d(0, 0, 0, 1);
+  q.normalize();
+  if (q[3] < 0) q = -q;
+  return {d.x(), d.y(), d.z(), q[0], q[1], q[2], q[3]};
+}
+
+// generateDataset.py's measurement: near the identity, translation axes ~ N(0, 0.3 m), angles
+// ~ N(0, 10°) (3D: yaw, pitch, roll, composed Z·Y·X), as a g2o measurement (x y θ, or
+// x y z qx qy qz qw with qw ≥ 0).
+std::array<double, 7> vertigoMeasurement(Rng& rng, bool is3d) {
+  constexpr double kSigmaT = 0.3, kSigmaR = 10.0 * M_PI / 180.0;
+  std::array<double, 7> m{};
+  if (!is3d) {
+    m[0] = kSigmaT * rng.normal();
+    m[1] = kSigmaT * rng.normal();
+    m[2] = kSigmaR * rng.normal();
+    return m;
+  }
+  for (int k = 0; k < 3; ++k) m[k] = kSigmaT * rng.normal();
+  const double yaw = kSigmaR * rng.normal(), pitch = kSigmaR * rng.normal(),
+               roll = kSigmaR * rng.normal();
+  Eigen::Quaterniond q = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
+                         Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+                         Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX());
+  if (q.w() < 0) q.coeffs() = -q.coeffs();
+  m[3] = q.x(), m[4] = q.y(), m[5] = q.z(), m[6] = q.w();
+  return m;
+}
+
+}  // namespace
+
+const char* outlierMeasurementName(OutlierMeasurement m) {
+  return m == OutlierMeasurement::Vertigo ? "vertigo" : "uniform";
 }
 
 OutlierResult addOutliers(const io::Dataset& input, const OutlierOptions& opt) {
@@ -72,8 +127,8 @@ OutlierResult addOutliers(const io::Dataset& input, const OutlierOptions& opt) {
   int made = 0;
   while (made < opt.count) {
     std::int64_t a, b;
-    const bool local = opt.mode == OutlierMode::Local ||
-                       (opt.mode == OutlierMode::Group && opt.localGroups);
+    const bool local =
+        opt.mode == OutlierMode::Local || (opt.mode == OutlierMode::Group && opt.localGroups);
     if (local) {
       a = rng.integer(0, n - 3 - span);
       b = a + rng.integer(2, opt.localWindow);
@@ -84,23 +139,9 @@ OutlierResult addOutliers(const io::Dataset& input, const OutlierOptions& opt) {
       b = rng.integer(a + 2, n - 1 - span);
     }
     // One measurement for the whole group.
-    std::array<double, 7> m{};
-    const double len = rng.uniform(0.0, L);
-    if (!is3d) {
-      const double dir = rng.uniform(-M_PI, M_PI);
-      m[0] = len * std::cos(dir);
-      m[1] = len * std::sin(dir);
-      m[2] = rng.uniform(-M_PI, M_PI);
-    } else {
-      Eigen::Vector3d d(rng.normal(), rng.normal(), rng.normal());
-      if (d.norm() < 1e-12) d = Eigen::Vector3d::UnitX();
-      d = d.normalized() * len;
-      Eigen::Vector4d q(rng.normal(), rng.normal(), rng.normal(), rng.normal());
-      if (q.norm() < 1e-12) q = Eigen::Vector4d(0, 0, 0, 1);
-      q.normalize();
-      if (q[3] < 0) q = -q;
-      m = {d.x(), d.y(), d.z(), q[0], q[1], q[2], q[3]};
-    }
+    const std::array<double, 7> m = opt.measurement == OutlierMeasurement::Vertigo
+                                        ? vertigoMeasurement(rng, is3d)
+                                        : uniformMeasurement(rng, is3d, L);
     const int k = std::min(groupSize, opt.count - made);
     for (int j = 0; j < k; ++j) {
       io::Edge e;
@@ -128,6 +169,7 @@ std::string outlierTruthJson(const std::string& inputPath, const OutlierOptions&
       .add("count", opt.count)
       .add("seed", static_cast<std::int64_t>(opt.seed))
       .add("group_size", opt.mode == OutlierMode::Group ? opt.groupSize : 1)
+      .add("measurement", outlierMeasurementName(opt.measurement))
       .add("outliers", outliers)
       .add("inlier_edges", r.inlierEdges);
   return o.str();

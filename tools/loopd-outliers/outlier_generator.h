@@ -7,10 +7,13 @@
 //   local:  a uniform, b ∈ [a + 2, a + window]
 //   group:  groups of K edges (a + j, b + j), j = 0…K−1, all with the SAME measurement
 //           (mutually consistent); (a, b) random, or local with localGroups
-// Measurement: rotation uniform (2D: θ ∈ [−π, π); 3D: uniform unit quaternion), translation
-// direction uniform and length uniform in [0, L], L = the median translation of the dataset's
-// loop closures (of all between edges if it has none). Information: that of the dataset's
-// loop closure with the median trace (or of its median-trace between edge).
+// Measurement (OutlierMeasurement::Uniform, the default): rotation uniform (2D: θ ∈ [−π, π);
+// 3D: uniform unit quaternion), translation direction uniform and length uniform in [0, L],
+// L = the median translation of the dataset's loop closures (of all between edges if it has
+// none). OutlierMeasurement::Vertigo: generateDataset.py's own, near the identity (a place
+// recognized where the robot is not): each translation axis ~ N(0, 0.3 m), each angle
+// (3D: yaw, pitch, roll) ~ N(0, 10°). Information: that of the dataset's loop closure with
+// the median trace (or of its median-trace between edge).
 // Deterministic for a seed (own uniform draws on std::mt19937_64, no library distributions).
 #include <cstdint>
 #include <string>
@@ -21,6 +24,7 @@
 namespace loopd::tools {
 
 enum class OutlierMode { Random, Local, Group };
+enum class OutlierMeasurement { Uniform, Vertigo };
 
 struct OutlierOptions {
   int count = 100;
@@ -28,6 +32,7 @@ struct OutlierOptions {
   int groupSize = 10;
   int localWindow = 50;
   bool localGroups = false;  // group mode: place groups like local outliers
+  OutlierMeasurement measurement = OutlierMeasurement::Uniform;
   std::uint64_t seed = 1;
 };
 
@@ -38,6 +43,8 @@ struct OutlierResult {
 };
 
 const char* outlierModeName(OutlierMode m);
+/// "uniform", "vertigo".
+const char* outlierMeasurementName(OutlierMeasurement m);
 /// "random", "local", "group"; throws std::invalid_argument otherwise.
 OutlierMode outlierModeFromName(const std::string& name);
 
@@ -45,8 +52,8 @@ OutlierMode outlierModeFromName(const std::string& name);
 /// bad options.
 OutlierResult addOutliers(const io::Dataset& input, const OutlierOptions& options);
 
-/// TRUTH.json: {"input", "mode", "count", "seed", "group_size", "outliers": [...],
-/// "inlier_edges"}.
+/// TRUTH.json: {"input", "mode", "count", "seed", "group_size", "measurement" ("uniform" or
+/// "vertigo"), "outliers": [...], "inlier_edges"}.
 std::string outlierTruthJson(const std::string& inputPath, const OutlierOptions& options,
                              const OutlierResult& result);
 
