@@ -28,6 +28,8 @@ class Values {
   int size() const { return static_cast<int>(keys_.size()); }
   bool empty() const { return keys_.empty(); }
   bool contains(Key k) const { return slots_.count(k) != 0; }
+  /// False if any stored number is NaN or ±inf (what a diverged solve leaves).
+  bool allFinite() const;
   /// Slot of k, or −1.
   int slot(Key k) const;
   Key key(int slot) const { return keys_[slot]; }

@@ -2,6 +2,7 @@
 // feed it (--incremental), and write the estimate, stats JSON and marginal covariances.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 
@@ -73,14 +74,21 @@ int run(const tools::SolveOptions& opt) {
   const double finalChi2 = backend->chi2();
   if (!opt.quiet)
     std::fprintf(stderr, "%s: final chi2 %.9g after %d iterations (%s), solve %.3f s\n",
-                 backend->name().c_str(), finalChi2, summary.iterations,
-                 summary.stopReason.c_str(), solveSeconds);
+                 backend->name().c_str(), finalChi2, summary.iterations, summary.stopReason.c_str(),
+                 solveSeconds);
 
-  if (!opt.out.empty()) {
+  // A diverged solve (NaN or infinite values) is an error, and its estimate is not written:
+  // downstream readers would take it for poses.
+  const bool diverged = !backend->estimate().allFinite() || !std::isfinite(finalChi2);
+  if (diverged)
+    std::fprintf(stderr, "loopd-solve: %s diverged: the estimate is not finite (%s); %s\n",
+                 backend->name().c_str(), summary.stopReason.c_str(),
+                 opt.out.empty() ? "exit status 3" : "no estimate written, exit status 3");
+  if (!opt.out.empty() && !diverged) {
     storeEstimate(backend->estimate(), dataset);
     io::writeG2oVertices(opt.out, dataset);
   }
-  if (!opt.covariances.empty()) {
+  if (!opt.covariances.empty() && !diverged) {
     const auto tCov = Clock::now();
     tools::writeCovariances(opt.covariances, *backend, dataset);
     if (!opt.quiet) std::fprintf(stderr, "covariances written in %.3f s\n", since(tCov));
@@ -100,6 +108,7 @@ int run(const tools::SolveOptions& opt) {
         .add("parse_s", parseSeconds)
         .add("solve_s", solveSeconds)
         .add("converged", summary.converged)
+        .add("diverged", diverged)
         .add("stop_reason", summary.stopReason)
         .add("incremental", opt.incremental);
     if (opt.incremental) {
@@ -139,7 +148,7 @@ int run(const tools::SolveOptions& opt) {
     stats.add("peak_rss_mb", tools::peakRssMb());
     stats.writeFile(opt.stats);
   }
-  return 0;
+  return diverged ? 3 : 0;
 }
 
 }  // namespace

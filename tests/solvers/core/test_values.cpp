@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <limits>
 #include <random>
 #include <stdexcept>
 #include <vector>
@@ -53,7 +54,8 @@ TEST(Key, OrderingIsRobotThenKindThenIndex) {
   EXPECT_LT(makeKey(3, KeyKind::Anchor, kMaxKeyIndex), makeKey(3, KeyKind::Switch, 0));
   // Index orders within a kind.
   EXPECT_LT(poseKey(9, 2), poseKey(10, 2));
-  EXPECT_LT(makeKey(kMaxRobotId - 1, KeyKind::Switch, kMaxKeyIndex), makeKey(kMaxRobotId, KeyKind::Pose, 0));
+  EXPECT_LT(makeKey(kMaxRobotId - 1, KeyKind::Switch, kMaxKeyIndex),
+            makeKey(kMaxRobotId, KeyKind::Pose, 0));
 
   std::mt19937 rng(21);
   std::uniform_int_distribution<std::uint32_t> robot(0, 5);
@@ -123,8 +125,8 @@ TEST(Values, InsertSlotAndGetEveryType) {
   EXPECT_TRUE(v.contains(landmarkKey(0)));
   EXPECT_FALSE(v.contains(landmarkKey(2)));
   EXPECT_EQ(v.key(2), landmarkKey(0));
-  EXPECT_EQ(v.keys(), (std::vector<Key>{poseKey(0), poseKey(1, 1), landmarkKey(0),
-                                        landmarkKey(1), makeKey(0, KeyKind::Switch, 0)}));
+  EXPECT_EQ(v.keys(), (std::vector<Key>{poseKey(0), poseKey(1, 1), landmarkKey(0), landmarkKey(1),
+                                        makeKey(0, KeyKind::Switch, 0)}));
   EXPECT_EQ(v.type(0), VarType::SE2);
   EXPECT_EQ(v.type(1), VarType::SE3);
   EXPECT_EQ(v.type(2), VarType::Point2);
@@ -174,6 +176,19 @@ TEST(Values, DuplicateInsertThrowsAndLeavesValuesUnchanged) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("r0:x0"), std::string::npos) << e.what();
   }
+}
+
+TEST(Values, AllFiniteFindsNanAndInfinity) {
+  Values v;
+  EXPECT_TRUE(v.allFinite());
+  v.insert(poseKey(0), SE2(1.0, 2.0, 0.3));
+  v.insertPoint3(landmarkKey(1), Vec3(1, 2, 3));
+  EXPECT_TRUE(v.allFinite());
+  Values nan = v, inf = v;
+  nan.data(0)[1] = std::numeric_limits<double>::quiet_NaN();
+  inf.data(1)[2] = -std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(nan.allFinite());
+  EXPECT_FALSE(inf.allFinite());
 }
 
 TEST(Values, SetInsertFromAssignFrom) {
