@@ -83,7 +83,7 @@ bool GncBackend::Run::admitFitting(int cap) {
     double rise = groupNet, bound = 0.0;
     for (int i : group) {
       rise += gate_[i];
-      bound += gnc_.medianFactor * b_.scale_ * half_[i];
+      bound += medianCap(i);
     }
     return rise <= bound;
   };
@@ -176,9 +176,8 @@ void GncBackend::Run::tryConsistentStart() {
   if (ownGate)
     for (int i = 0; i < n_; ++i)
       if (cbar_[i] > 0.0 && candidateGate[i] < cbar_[i])
-        candidateGate[i] = std::max(
-            candidateGate[i],
-            std::min(cbar_[i] / gnc_.widenFactor, gnc_.medianFactor * b_.scale_ * half_[i]));
+        candidateGate[i] =
+            std::max(candidateGate[i], std::min(cbar_[i] / gnc_.widenFactor, medianCap(i)));
   const double candidateScale = b_.scale_, candidateTail = b_.tailGate_;
   b_.scale_ = usedScale, b_.tailGate_ = usedGate;
   const std::vector<double> keptGate = gate_;

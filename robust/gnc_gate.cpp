@@ -33,6 +33,8 @@ std::vector<double> GncBackend::Run::acceptedNormalized() const {
   return q;
 }
 
+double GncBackend::Run::medianCap(int i) const { return gnc_.medianFactor * b_.scale_ * half_[i]; }
+
 // The noise-aware gate from the closures the current solution accepts: the tail of their
 // normalized χ². It acts (returns true, `out` set) when it is wider (heavy tail, manhattan:
 // out = max(c̄², g·χ²_dim(0.5))) or, with `tighten`, tighter (under-confident information,

@@ -47,6 +47,8 @@ class GncBackend::Run {
 
   // The gate (gnc_gate.cpp).
   std::vector<double> acceptedNormalized() const;
+  /// medianFactor × the current noise scale, in factor i's χ² units (the gate's median cap).
+  double medianCap(int i) const;
   bool estimateGate(std::vector<double>& out);
   bool shrinkGate();
   void readmitAtTail(double cap);
