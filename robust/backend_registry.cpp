@@ -1,6 +1,7 @@
 #include "robust/backend_registry.h"
 
 #include <stdexcept>
+#include <utility>
 
 #include "robust/gnc_backend.h"
 #include "robust/mh_backend.h"
@@ -23,17 +24,21 @@ std::unique_ptr<Backend> batch(OptimizerMethod m, BackendOptions o) {
   return std::make_unique<BatchBackend>(std::move(o));
 }
 
+// iSAM2 checking for relinearization at every update.
+Isam2Options everyUpdate() {
+  Isam2Options isam;
+  isam.relinearizeSkip = 1;
+  return isam;
+}
+
 // Robust decorators run over the incremental iSAM2 backend (the batch LM one if a build has
 // no "isam2" entry). The kernel/switch/mixture decorators check relinearization at every
 // update (relinearizeSkip 1): their weights and choices only refresh when a factor is
 // relinearized. riSAM keeps iSAM2's own skip and forces relinearization on its graduation
-// steps only (RisamOptions::relinearizeGraduation).
-std::unique_ptr<Backend> robustInner(const BackendOptions& o, int relinearizeSkip = 1) {
-  if (isBackendName("isam2")) {
-    Isam2Options isam;
-    isam.relinearizeSkip = relinearizeSkip;
-    return std::make_unique<Isam2Backend>(o, isam);
-  }
+// steps only (RisamOptions::relinearizeGraduation) and after a step of a radian or a metre
+// (Isam2Options::urgentRelinearizeThreshold: its SIG weights follow the estimate).
+std::unique_ptr<Backend> robustInner(const BackendOptions& o, Isam2Options isam = everyUpdate()) {
+  if (isBackendName("isam2")) return std::make_unique<Isam2Backend>(o, isam);
   return batch(OptimizerMethod::LevenbergMarquardt, o);
 }
 
@@ -52,8 +57,8 @@ std::unique_ptr<Backend> gnc(GncLoss loss, const BackendOptions& o) {
   return std::make_unique<GncBackend>(o, g);
 }
 
-const std::vector<Entry>& registry() {
-  static const std::vector<Entry> entries = {
+std::vector<Entry>& registry() {
+  static std::vector<Entry> entries = {
       {{"lm", "batch Levenberg-Marquardt (default)", false},
        [](const BackendOptions& o) { return batch(OptimizerMethod::LevenbergMarquardt, o); }},
       {{"gn", "batch Gauss-Newton", false},
@@ -104,7 +109,9 @@ const std::vector<Entry>& registry() {
        [](const BackendOptions& o) {
          RisamOptions r;
          if (o.robustParameter > 0.0) r.shape = o.robustParameter;
-         return std::make_unique<RisamBackend>(robustInner(o, Isam2Options{}.relinearizeSkip), r);
+         Isam2Options isam;
+         isam.urgentRelinearizeThreshold = 1.0;
+         return std::make_unique<RisamBackend>(robustInner(o, isam), r);
        }},
       {{"mh", "multi-hypothesis iSAM2 (MH-iSAM2 manner) for ambiguous measurements; K = 10", true},
        [](const BackendOptions& o) { return std::make_unique<MhBackend>(o, MhOptions{}); }},
@@ -126,6 +133,13 @@ std::vector<BackendInfo> availableBackends() {
   std::vector<BackendInfo> out;
   for (const auto& e : registry()) out.push_back(e.info);
   return out;
+}
+
+void registerBackend(BackendInfo info, BackendFactory make) {
+  if (info.name.empty() || isBackendName(info.name) || !make)
+    throw std::invalid_argument("registerBackend: '" + info.name +
+                                "' is empty, taken or has no factory");
+  registry().push_back({std::move(info), std::move(make)});
 }
 
 bool isBackendName(const std::string& name) {

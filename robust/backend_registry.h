@@ -19,5 +19,8 @@ struct BackendInfo {
 std::unique_ptr<Backend> makeBackend(const std::string& name, const BackendOptions& options = {});
 std::vector<BackendInfo> availableBackends();
 bool isBackendName(const std::string& name);
+/// Adds a variant under a new name (tests, applications embedding the server), before any
+/// thread uses the registry. Throws std::invalid_argument if the name is empty or taken.
+void registerBackend(BackendInfo info, BackendFactory make);
 
 }  // namespace loopd

@@ -857,6 +857,8 @@ bool Isam2Backend::solveClique(const Clique& C, std::vector<Key>* moved) {
       movedStamp_[v] = epoch_;
       moved->push_back(estimate_.key(v));
     }
+    if (isam_.urgentRelinearizeThreshold > 0.0 && size >= isam_.urgentRelinearizeThreshold)
+      relinearizeNext_ = true;
     if (size >= isam_.relinearizeThreshold && !relinCandidate_[v]) {
       relinCandidate_[v] = 1;
       relinCandidates_.push_back(v);

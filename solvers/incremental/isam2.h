@@ -23,6 +23,11 @@ namespace loopd {
 struct Isam2Options {
   double relinearizeThreshold = 0.1;  // β: max |Δ| component (rad or m) before relinearizing
   int relinearizeSkip = 10;  // check for relinearization every k-th update (GTSAM's default)
+  // A variable whose Δ reaches this (any component) makes the next update check for
+  // relinearization whatever relinearizeSkip says (0: off). A factor whose weight follows the
+  // estimate (riSAM's SIG kernel) linearized at a θ that far behind feeds each update's Δ back
+  // into the next one's weights: an iteration that can run away to NaN.
+  double urgentRelinearizeThreshold = 0.0;
   double wildfireThreshold = 0.001;  // α: descend into a subtree if a separator Δ moved more
   // Ordering of the top: variables that no new factor touched for this many updates are
   // eliminated first (0: off), if that costs at most recencyFillTolerance × the fill of the
