@@ -277,6 +277,16 @@ void Engine::idle() {
     } catch (const std::exception& e) {
       spdlog::error("optimize() failed: {}", e.what());
     }
+    if (!backend_->estimate().allFinite()) {
+      spdlog::error(
+          "idle optimize diverged (NaN or infinite estimate); back to the estimate "
+          "before it");
+      try {
+        recoverFromDivergence(&before);
+      } catch (const std::exception& e) {
+        spdlog::critical("solver could not be rebuilt: {}", e.what());
+      }
+    }
     const double sec = std::chrono::duration<double>(Clock::now() - t0).count();
     dirty_ = false;
     std::vector<Key> moved;
@@ -873,8 +883,21 @@ std::vector<Key> Engine::applyUpdate(BackendUpdate u, const std::vector<FactorId
     for (const auto& f : it->second.factor.alternatives) u.removals.push_back(f->id());
   }
   if (!backend_->handlesAmbiguous()) flattenAmbiguous(u);
-  if (!u.factors.empty() || !u.removals.empty() || !u.ambiguous.empty())
+  if (!u.factors.empty() || !u.removals.empty() || !u.ambiguous.empty()) {
     moved = backend_->update(u).moved;
+    if (!backend_->estimate().allFinite()) {
+      spdlog::error(
+          "the {} solver diverged (NaN or infinite estimate); rebuilding it without "
+          "this update",
+          backend_->name());
+      try {
+        recoverFromDivergence(nullptr);
+      } catch (const std::exception& e) {
+        spdlog::critical("solver could not be rebuilt: {}", e.what());
+      }
+      throw std::runtime_error("the solver diverged on it (NaN or infinite estimate)");
+    }
+  }
   moved.insert(moved.end(), newKeys.begin(), newKeys.end());
   return moved;
 }

@@ -64,6 +64,7 @@ struct Inbound {
 struct EngineCounters {
   std::int64_t accepted = 0, rejected = 0, duplicate = 0, expired = 0, held = 0, updates = 0,
                decodeFailed = 0, internalErrors = 0, journaled = 0;
+  std::int64_t divergences = 0;  // solver steps that left NaN/inf (solver rebuilt, round refused)
 };
 
 class Engine : private GraphView {
@@ -184,6 +185,9 @@ class Engine : private GraphView {
   std::vector<loopd::loop_decision_t> decisionList(bool full);
   Eigen::MatrixXd commonFrameCovariance(const std::vector<Key>& keys);
   void rebuildBackend(const std::string& solver);
+  /// The backend's estimate is not finite: a new backend from the committed graph, started at
+  /// lastGood (if given) and the finite rest (engine_divergence.cpp). Throws if it diverges too.
+  void recoverFromDivergence(const Values* lastGood);
   /// Gives a new backend the whole graph (mh: plain factors, optimize, then the groups).
   void feedRebuilt(Backend& next, BackendUpdate all);
   void resetAll();

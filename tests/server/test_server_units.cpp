@@ -14,12 +14,15 @@
 #include "loopd/error_t.hpp"
 #include "loopd/estimate_t.hpp"
 #include "loopd/status_t.hpp"
+#include "robust/backend_registry.h"
+#include "robust/decorator_backend.h"
 #include "server/anchored_between_factor.h"
 #include "server/batch_validator.h"
-#include "tests/server/wire_encode.h"
 #include "server/engine.h"
 #include "server/server_config.h"
 #include "server/session_table.h"
+#include "solvers/incremental/isam2.h"
+#include "tests/server/wire_encode.h"
 
 using namespace loopd;
 using namespace loopd::server;
@@ -444,6 +447,63 @@ TEST(Engine, RemovalsAndCommands) {
   // After RESET sequences restart.
   f.send(batch("r0", 1, {between2(0, 0, 0, 0, 1, {1, 0, 0})}));
   EXPECT_EQ(f.poses(), 2);
+}
+
+// "isam2" whose estimate turns NaN once its chi2 passes 1e30: a stand-in for a variant that
+// runs away on absurd input (the shipped ones keep this test's estimate finite).
+class RunawayBackend : public DecoratorBackend {
+ public:
+  RunawayBackend() : DecoratorBackend(std::make_unique<Isam2Backend>(), "RunawayBackend") {}
+  std::string name() const override { return "runaway"; }
+  UpdateResult update(const BackendUpdate& u) override {
+    const UpdateResult r = inner_->update(u);
+    commitOriginals(u, {u.removals.begin(), u.removals.end()});
+    if (!(inner_->chi2() < 1e30)) {
+      nan_ = inner_->estimate();
+      for (int s = 0; s < nan_.size(); ++s)
+        std::fill_n(nan_.data(s), kValueStride, std::numeric_limits<double>::quiet_NaN());
+    }
+    return r;
+  }
+  const Values& estimate() const override { return nan_.empty() ? inner_->estimate() : nan_; }
+
+ private:
+  Values nan_;
+};
+
+// An odometry of 1e200 m passes validation (finite) and the solver runs away on it. The round
+// is refused with an error, the solver is rebuilt from the graph before it, nothing non-finite
+// is published, and later batches apply.
+TEST(Engine, RefusesARoundThatMakesTheSolverDiverge) {
+  static const bool registered = [] {
+    registerBackend({"runaway", "test: NaN estimate once chi2 > 1e30", true},
+                    [](const BackendOptions&) { return std::make_unique<RunawayBackend>(); });
+    return true;
+  }();
+  ASSERT_TRUE(registered);
+  EngineFixture f("runaway");
+  std::int64_t seq = 0, id = 0;
+  chain(f, "r0", 0, 0, 4, seq, id);
+  const size_t published = f.out.estimates.size();
+  f.send(batch("r0", ++seq,
+               {between2(id++, 0, 4, 0, 5, {1e200, 0, 0}),
+                between2(id++, 0, 5, 0, 0, {0, 0, 0}, factor_t::ROLE_LOOP_CLOSURE)}));
+  ASSERT_FALSE(f.out.errors.empty());
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::INTERNAL);
+  EXPECT_EQ(f.out.errors.back().sequence, seq);
+  EXPECT_NE(f.out.errors.back().reason.find("diverged"), std::string::npos)
+      << f.out.errors.back().reason;
+  EXPECT_EQ(f.poses(), 5);
+  EXPECT_TRUE(f.engine.backend().estimate().allFinite());
+  EXPECT_GE(f.engine.counters().divergences, 1);
+  // The next pose, from pose 4 as if the refused batch had never come.
+  f.send(batch("r0", ++seq, {between2(id++, 0, 4, 0, 5, {1, 0, 0.1})}));
+  EXPECT_EQ(f.poses(), 6);
+  EXPECT_TRUE(f.engine.backend().estimate().allFinite());
+  EXPECT_LT(f.engine.backend().chi2(), 1e-9);  // odometry only: every factor exact
+  for (size_t e = published; e < f.out.estimates.size(); ++e)
+    for (const auto& pose : f.out.estimates[e].poses)
+      for (double v : pose) EXPECT_TRUE(std::isfinite(v));
 }
 
 // A 20-pose walk whose every pose also sees the one two steps back (true closures), then one

@@ -1,0 +1,93 @@
+// A solver step that leaves NaN or infinite values (a measurement of absurd size, a variant
+// that ran away) must not reach the estimate channel or poison every later update: the
+// engine rebuilds the solver from the graph it had before, and the round is refused.
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <unordered_set>
+
+#include "server/engine.h"
+#include "solvers/problem/initial_guess.h"
+
+namespace loopd::server {
+
+namespace {
+
+bool finiteSlot(const Values& x, int s) {
+  for (int i = 0; i < kValueStride; ++i)
+    if (!std::isfinite(x.data(s)[i])) return false;
+  return true;
+}
+
+// A part of the graph none of whose variables has a value left: its first variable starts at
+// the origin, the rest is composed from it. False if every variable has a value.
+bool seedOneMissing(const std::vector<FactorPtr>& factors, Values& initial) {
+  for (const FactorPtr& f : factors)
+    for (int k = 0; k < f->size(); ++k) {
+      const Key key = f->key(k);
+      if (initial.contains(key)) continue;
+      switch (f->varType(k)) {
+        case VarType::SE2:
+          initial.insert(key, SE2());
+          break;
+        case VarType::SE3:
+          initial.insert(key, SE3());
+          break;
+        case VarType::Point2:
+          initial.insertPoint2(key, Vec2::Zero());
+          break;
+        case VarType::Point3:
+          initial.insertPoint3(key, Vec3::Zero());
+          break;
+        case VarType::Scalar:
+          initial.insertScalar(key, 0.0);
+          break;
+      }
+      return true;
+    }
+  return false;
+}
+
+}  // namespace
+
+void Engine::recoverFromDivergence(const Values* lastGood) {
+  const Values& x = backend_->estimate();
+  BackendUpdate all;
+  std::unordered_set<Key> used;
+  auto use = [&](const FactorPtr& f) {
+    for (int k = 0; k < f->size(); ++k) used.insert(f->key(k));
+  };
+  for (const auto& [id, f] : live_) {
+    all.factors.push_back(f);
+    use(f);
+  }
+  for (const auto& [id, g] : groups_) {
+    all.ambiguous.push_back(g.factor);
+    for (const auto& f : g.factor.alternatives) use(f);
+  }
+  // Start from the last good estimate where there is one, else from the finite part of the
+  // diverged one; the rest is composed along the odometry from its neighbours.
+  for (int s = 0; lastGood && s < lastGood->size(); ++s)
+    if (used.count(lastGood->key(s)) && finiteSlot(*lastGood, s))
+      all.initial.insertFrom(*lastGood, s);
+  for (int s = 0; s < x.size(); ++s)
+    if (used.count(x.key(s)) && !all.initial.contains(x.key(s)) && finiteSlot(x, s))
+      all.initial.insertFrom(x, s);
+  std::vector<FactorPtr> everything = all.factors;
+  for (const auto& a : all.ambiguous)
+    everything.insert(everything.end(), a.alternatives.begin(), a.alternatives.end());
+  while (!predictMissingValues(everything, Values(), all.initial))
+    if (!seedOneMissing(everything, all.initial)) break;
+  std::unique_ptr<PerFactorRobustBackend> next = makeSolver(backend_->name());
+  feedRebuilt(*next, std::move(all));
+  next->optimize();  // started from composed odometry: converge before publishing
+  if (!next->estimate().allFinite()) throw std::runtime_error("the rebuilt solver diverged too");
+  backend_ = std::move(next);
+  lastDecisions_.clear();
+  lastGroupDecisions_.clear();
+  dirty_ = true;
+  std::lock_guard<std::mutex> l(countersMu_);
+  ++counters_.divergences;
+}
+
+}  // namespace loopd::server
