@@ -79,8 +79,8 @@ void Engine::recoverFromDivergence(const Values* lastGood) {
   while (!predictMissingValues(everything, Values(), all.initial))
     if (!seedOneMissing(everything, all.initial)) break;
   std::unique_ptr<PerFactorRobustBackend> next = makeSolver(backend_->name());
+  // No optimize() here: it may be what diverged. The next idle optimize converges.
   feedRebuilt(*next, std::move(all));
-  next->optimize();  // started from composed odometry: converge before publishing
   if (!next->estimate().allFinite()) throw std::runtime_error("the rebuilt solver diverged too");
   backend_ = std::move(next);
   lastDecisions_.clear();

@@ -451,36 +451,51 @@ TEST(Engine, RemovalsAndCommands) {
 
 // "isam2" whose estimate turns NaN once its chi2 passes 1e30: a stand-in for a variant that
 // runs away on absurd input (the shipped ones keep this test's estimate finite).
+// With onOptimize, it is optimize() that runs away, whatever the graph.
 class RunawayBackend : public DecoratorBackend {
  public:
-  RunawayBackend() : DecoratorBackend(std::make_unique<Isam2Backend>(), "RunawayBackend") {}
-  std::string name() const override { return "runaway"; }
+  explicit RunawayBackend(bool onOptimize)
+      : DecoratorBackend(std::make_unique<Isam2Backend>(), "RunawayBackend"),
+        onOptimize_(onOptimize) {}
+  std::string name() const override { return onOptimize_ ? "runaway-optimize" : "runaway"; }
   UpdateResult update(const BackendUpdate& u) override {
     const UpdateResult r = inner_->update(u);
     commitOriginals(u, {u.removals.begin(), u.removals.end()});
-    if (!(inner_->chi2() < 1e30)) {
-      nan_ = inner_->estimate();
-      for (int s = 0; s < nan_.size(); ++s)
-        std::fill_n(nan_.data(s), kValueStride, std::numeric_limits<double>::quiet_NaN());
-    }
+    if (!(inner_->chi2() < 1e30)) runAway();
     return r;
+  }
+  void optimize() override {
+    inner_->optimize();
+    if (onOptimize_) runAway();
   }
   const Values& estimate() const override { return nan_.empty() ? inner_->estimate() : nan_; }
 
  private:
+  void runAway() {
+    nan_ = inner_->estimate();
+    for (int s = 0; s < nan_.size(); ++s)
+      std::fill_n(nan_.data(s), kValueStride, std::numeric_limits<double>::quiet_NaN());
+  }
+  bool onOptimize_;
   Values nan_;
 };
+
+void registerRunawayBackends() {
+  static const bool registered = [] {
+    registerBackend({"runaway", "test: NaN estimate once chi2 > 1e30", true},
+                    [](const BackendOptions&) { return std::make_unique<RunawayBackend>(false); });
+    registerBackend({"runaway-optimize", "test: NaN estimate after optimize()", true},
+                    [](const BackendOptions&) { return std::make_unique<RunawayBackend>(true); });
+    return true;
+  }();
+  ASSERT_TRUE(registered);
+}
 
 // An odometry of 1e200 m passes validation (finite) and the solver runs away on it. The round
 // is refused with an error, the solver is rebuilt from the graph before it, nothing non-finite
 // is published, and later batches apply.
 TEST(Engine, RefusesARoundThatMakesTheSolverDiverge) {
-  static const bool registered = [] {
-    registerBackend({"runaway", "test: NaN estimate once chi2 > 1e30", true},
-                    [](const BackendOptions&) { return std::make_unique<RunawayBackend>(); });
-    return true;
-  }();
-  ASSERT_TRUE(registered);
+  registerRunawayBackends();
   EngineFixture f("runaway");
   std::int64_t seq = 0, id = 0;
   chain(f, "r0", 0, 0, 4, seq, id);
@@ -501,6 +516,31 @@ TEST(Engine, RefusesARoundThatMakesTheSolverDiverge) {
   EXPECT_EQ(f.poses(), 6);
   EXPECT_TRUE(f.engine.backend().estimate().allFinite());
   EXPECT_LT(f.engine.backend().chi2(), 1e-9);  // odometry only: every factor exact
+  for (size_t e = published; e < f.out.estimates.size(); ++e)
+    for (const auto& pose : f.out.estimates[e].poses)
+      for (double v : pose) EXPECT_TRUE(std::isfinite(v));
+}
+
+// An idle optimize that runs away is rolled back to the estimate before it; nothing
+// non-finite is published and updates go on.
+TEST(Engine, RollsBackAnIdleOptimizeThatDiverges) {
+  registerRunawayBackends();
+  EngineFixture f("runaway-optimize", 30);
+  std::int64_t seq = 0, id = 0;
+  chain(f, "r0", 0, 0, 4, seq, id);
+  std::vector<double> before;
+  ASSERT_TRUE(f.engine.commonFramePose(poseKey(4, 0), before));
+  const size_t published = f.out.estimates.size();
+  f.command(command_t::OPTIMIZE);
+  EXPECT_EQ(f.engine.counters().divergences, 1);
+  EXPECT_TRUE(f.engine.backend().estimate().allFinite());
+  std::vector<double> after;
+  ASSERT_TRUE(f.engine.commonFramePose(poseKey(4, 0), after));
+  ASSERT_EQ(after.size(), before.size());
+  for (size_t i = 0; i < after.size(); ++i) EXPECT_NEAR(after[i], before[i], 1e-9);
+  chain(f, "r0", 0, 4, 6, seq, id);
+  EXPECT_EQ(f.poses(), 7);
+  EXPECT_TRUE(f.engine.backend().estimate().allFinite());
   for (size_t e = published; e < f.out.estimates.size(); ++e)
     for (const auto& pose : f.out.estimates[e].poses)
       for (double v : pose) EXPECT_TRUE(std::isfinite(v));
