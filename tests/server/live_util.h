@@ -30,6 +30,18 @@ inline const std::string kListen = kBin + "/tools/loopd-listen";
 inline const std::string kSolve = kBin + "/tools/loopd-solve";
 inline const std::string kData = LOOPD_DATASETS_DIR;
 
+// An AddressSanitizer build runs the server several times slower: a batch of 4-robot
+// city10000 or an idle optimize can outlast a quiet period sized for Release. Quiet periods
+// and waits scale by this.
+#if defined(__SANITIZE_ADDRESS__)
+inline constexpr double kSlowdown = 10.0;
+#else
+inline constexpr double kSlowdown = 1.0;
+#endif
+
+/// A loopd-listen --until-quiet argument: `seconds` in a Release build.
+inline std::string quietFor(double seconds) { return std::to_string(seconds * kSlowdown); }
+
 /// Routes multicast through lo when the host has no route (scripts/ensure-multicast.sh).
 inline void ensureMulticast() {
   static bool done = false;
@@ -71,9 +83,11 @@ struct Proc {
     posix_spawn_file_actions_destroy(&fa);
     return p;
   }
-  /// Waits up to `seconds`; returns the exit code, or −1 on timeout (then kills it), 128+sig.
+  /// Waits up to `seconds` (× kSlowdown); returns the exit code, or −1 on timeout (then kills it),
+  /// 128+sig.
   int wait(double seconds) {
-    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    const auto end =
+        std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds * kSlowdown);
     while (std::chrono::steady_clock::now() < end) {
       int st = 0;
       const pid_t r = waitpid(pid, &st, WNOHANG);

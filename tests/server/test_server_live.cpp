@@ -63,7 +63,8 @@ TEST(ServerLive, IntelMatchesOfflineSolve) {
   Proc srv = server(url, {}, tmp("srv.log"));
   ASSERT_TRUE(srv.alive()) << srv.output();
   const std::string est = tmp("est.g2o");
-  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", "2"}, tmp("listen.log"));
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", quietFor(2)},
+                            tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url}, tmp("feed.log")), 0);
   ASSERT_EQ(listen.wait(60), 0) << listen.output();
@@ -78,7 +79,8 @@ TEST(ServerLive, FourRobotCity10000EndsInOneFrameAtTheOptimum) {
   const std::string data = kData + "/city10000.g2o";
   Proc srv = server(url, {}, tmp("srv.log"));
   const std::string est = tmp("est.g2o");
-  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", "3"}, tmp("listen.log"));
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", quietFor(3)},
+                            tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   ASSERT_EQ(runTool({kFeed, data, "--robots", "4", "--lcm-url", url}, tmp("feed.log")), 0);
   ASSERT_EQ(listen.wait(180), 0) << listen.output();
@@ -95,7 +97,8 @@ TEST(ServerLive, LogplayerReplayGivesTheSameResult) {
   ASSERT_EQ(runTool({kFeed, data, "--robots", "2", "--log", log}, tmp("feed.log")), 0);
   Proc srv = server(url, {}, tmp("srv.log"));
   const std::string est = tmp("est.g2o");
-  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", "2"}, tmp("listen.log"));
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", quietFor(2)},
+                            tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   // 1 ms between logged batches: real time at 4x.
   ASSERT_EQ(runTool({"/usr/bin/lcm-logplayer", "-s", "4", "-l", url, log}, tmp("player.log")), 0);
@@ -122,7 +125,8 @@ TEST(ServerLive, KillNineResumeFeedTheRestLosesNothing) {
   const std::string out = srv.output();
   EXPECT_NE(out.find("resumed"), std::string::npos) << out;
   const std::string est = tmp("est.g2o");
-  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", "2"}, tmp("listen.log"));
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", quietFor(2)},
+                            tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url, "--quiet"}, tmp("feed2.log")), 0);  // everything again
   ASSERT_EQ(listen.wait(60), 0) << listen.output();
@@ -146,7 +150,8 @@ TEST(ServerLive, DuplicateFeedIsAppliedOnce) {
   const std::string data = kData + "/intel.g2o";
   Proc srv = server(url, {"--solver", "lm"}, tmp("srv.log"));
   const std::string est = tmp("est.g2o");
-  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", "2"}, tmp("listen.log"));
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", quietFor(2)},
+                            tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url, "--poses", "500", "--quiet"}, tmp("feed1.log")), 0);
   ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url, "--poses", "500", "--quiet"}, tmp("feed2.log")), 0);
