@@ -129,6 +129,25 @@ std::int64_t readHash(const std::uint8_t* p) {
 SE2 se2Of(const Values& v, Key k) { return v.se2(v.slot(k)); }
 SE3 se3Of(const Values& v, Key k) { return v.se3(v.slot(k)); }
 
+// The whole graph into a new backend (mh: plain factors, optimize, then the groups).
+void feedWhole(Backend& next, BackendUpdate all) {
+  if (!next.handlesAmbiguous()) {
+    flattenAmbiguous(all);
+    if (!all.factors.empty()) next.update(all);
+    return;
+  }
+  // The hypotheses branch on the optimum of the rest of the graph (as when the groups arrived
+  // one by one), not on an estimate another variant left (flattened decoys drag it).
+  BackendUpdate groups;
+  groups.ambiguous = std::move(all.ambiguous);
+  all.ambiguous.clear();
+  if (!all.factors.empty()) {
+    next.update(all);
+    next.optimize();
+  }
+  if (!groups.ambiguous.empty()) next.update(groups);
+}
+
 }  // namespace
 
 Engine::Engine(EngineOptions options, Publisher& publisher, Journal* journal)
@@ -1255,21 +1274,10 @@ void Engine::commandError(const loopd::command_t& c, std::int8_t code, const std
 }
 
 void Engine::feedRebuilt(Backend& next, BackendUpdate all) {
-  if (!next.handlesAmbiguous()) {
-    flattenAmbiguous(all);
-    if (!all.factors.empty()) next.update(all);
-    return;
-  }
-  // The hypotheses branch on the optimum of the rest of the graph (as when the groups arrived
-  // one by one), not on an estimate another variant left (flattened decoys drag it).
-  BackendUpdate groups;
-  groups.ambiguous = std::move(all.ambiguous);
-  all.ambiguous.clear();
-  if (!all.factors.empty()) {
-    next.update(all);
-    next.optimize();
-  }
-  if (!groups.ambiguous.empty()) next.update(groups);
+  feedWhole(next, std::move(all));
+  // Callers swap `next` in only if this returns: a diverged rebuild leaves the old backend.
+  if (!next.estimate().allFinite())
+    throw std::runtime_error("the rebuilt solver diverged (NaN or infinite estimate)");
 }
 
 std::unique_ptr<PerFactorRobustBackend> Engine::makeSolver(const std::string& name) const {

@@ -189,6 +189,7 @@ class Engine : private GraphView {
   /// lastGood (if given) and the finite rest (engine_divergence.cpp). Throws if it diverges too.
   void recoverFromDivergence(const Values* lastGood);
   /// Gives a new backend the whole graph (mh: plain factors, optimize, then the groups).
+  /// Throws if its estimate is then not finite.
   void feedRebuilt(Backend& next, BackendUpdate all);
   void resetAll();
   void regroup(std::vector<Key>& moved);

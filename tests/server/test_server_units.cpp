@@ -451,22 +451,23 @@ TEST(Engine, RemovalsAndCommands) {
 
 // "isam2" whose estimate turns NaN once its chi2 passes 1e30: a stand-in for a variant that
 // runs away on absurd input (the shipped ones keep this test's estimate finite).
-// With onOptimize, it is optimize() that runs away, whatever the graph.
+// When it runs away: once chi2 passes 1e30, at every optimize(), or at every update.
+enum class Runaway { HugeChi2, Optimize, Always };
+
 class RunawayBackend : public DecoratorBackend {
  public:
-  explicit RunawayBackend(bool onOptimize)
-      : DecoratorBackend(std::make_unique<Isam2Backend>(), "RunawayBackend"),
-        onOptimize_(onOptimize) {}
-  std::string name() const override { return onOptimize_ ? "runaway-optimize" : "runaway"; }
+  explicit RunawayBackend(Runaway when)
+      : DecoratorBackend(std::make_unique<Isam2Backend>(), "RunawayBackend"), when_(when) {}
+  std::string name() const override { return "runaway"; }
   UpdateResult update(const BackendUpdate& u) override {
     const UpdateResult r = inner_->update(u);
     commitOriginals(u, {u.removals.begin(), u.removals.end()});
-    if (!(inner_->chi2() < 1e30)) runAway();
+    if (when_ == Runaway::Always || !(inner_->chi2() < 1e30)) runAway();
     return r;
   }
   void optimize() override {
     inner_->optimize();
-    if (onOptimize_) runAway();
+    if (when_ == Runaway::Optimize) runAway();
   }
   const Values& estimate() const override { return nan_.empty() ? inner_->estimate() : nan_; }
 
@@ -476,16 +477,18 @@ class RunawayBackend : public DecoratorBackend {
     for (int s = 0; s < nan_.size(); ++s)
       std::fill_n(nan_.data(s), kValueStride, std::numeric_limits<double>::quiet_NaN());
   }
-  bool onOptimize_;
+  Runaway when_;
   Values nan_;
 };
 
 void registerRunawayBackends() {
   static const bool registered = [] {
-    registerBackend({"runaway", "test: NaN estimate once chi2 > 1e30", true},
-                    [](const BackendOptions&) { return std::make_unique<RunawayBackend>(false); });
-    registerBackend({"runaway-optimize", "test: NaN estimate after optimize()", true},
-                    [](const BackendOptions&) { return std::make_unique<RunawayBackend>(true); });
+    for (const auto& [name, when] :
+         {std::pair{"runaway", Runaway::HugeChi2}, std::pair{"runaway-optimize", Runaway::Optimize},
+          std::pair{"runaway-always", Runaway::Always}})
+      registerBackend({name, "test: a NaN estimate", true}, [when = when](const BackendOptions&) {
+        return std::make_unique<RunawayBackend>(when);
+      });
     return true;
   }();
   ASSERT_TRUE(registered);
@@ -544,6 +547,23 @@ TEST(Engine, RollsBackAnIdleOptimizeThatDiverges) {
   for (size_t e = published; e < f.out.estimates.size(); ++e)
     for (const auto& pose : f.out.estimates[e].poses)
       for (double v : pose) EXPECT_TRUE(std::isfinite(v));
+}
+
+// SWITCH_SOLVER to a variant that diverges on the graph fails; the old solver stays.
+TEST(Engine, KeepsTheSolverWhenASwitchDiverges) {
+  registerRunawayBackends();
+  EngineFixture f("isam2");
+  std::int64_t seq = 0, id = 0;
+  chain(f, "r0", 0, 0, 4, seq, id);
+  f.command(command_t::SWITCH_SOLVER, "runaway-always");
+  ASSERT_FALSE(f.out.errors.empty());
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::COMMAND_FAILED);
+  EXPECT_NE(f.out.errors.back().reason.find("diverged"), std::string::npos)
+      << f.out.errors.back().reason;
+  EXPECT_EQ(f.engine.backend().name(), "isam2");
+  EXPECT_TRUE(f.engine.backend().estimate().allFinite());
+  chain(f, "r0", 0, 4, 5, seq, id);
+  EXPECT_EQ(f.poses(), 6);
 }
 
 // A 20-pose walk whose every pose also sees the one two steps back (true closures), then one
