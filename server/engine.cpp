@@ -296,16 +296,7 @@ void Engine::idle() {
     } catch (const std::exception& e) {
       spdlog::error("optimize() failed: {}", e.what());
     }
-    if (!backend_->estimate().allFinite()) {
-      spdlog::error(
-          "idle optimize diverged (NaN or infinite estimate); back to the estimate "
-          "before it");
-      try {
-        recoverFromDivergence(&before);
-      } catch (const std::exception& e) {
-        spdlog::critical("solver could not be rebuilt: {}", e.what());
-      }
-    }
+    recoverIfDiverged("an idle optimize", &before);
     const double sec = std::chrono::duration<double>(Clock::now() - t0).count();
     dirty_ = false;
     std::vector<Key> moved;
@@ -904,18 +895,8 @@ std::vector<Key> Engine::applyUpdate(BackendUpdate u, const std::vector<FactorId
   if (!backend_->handlesAmbiguous()) flattenAmbiguous(u);
   if (!u.factors.empty() || !u.removals.empty() || !u.ambiguous.empty()) {
     moved = backend_->update(u).moved;
-    if (!backend_->estimate().allFinite()) {
-      spdlog::error(
-          "the {} solver diverged (NaN or infinite estimate); rebuilding it without "
-          "this update",
-          backend_->name());
-      try {
-        recoverFromDivergence(nullptr);
-      } catch (const std::exception& e) {
-        spdlog::critical("solver could not be rebuilt: {}", e.what());
-      }
+    if (recoverIfDiverged("an update", nullptr))
       throw std::runtime_error("the solver diverged on it (NaN or infinite estimate)");
-    }
   }
   moved.insert(moved.end(), newKeys.begin(), newKeys.end());
   return moved;

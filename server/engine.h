@@ -185,8 +185,12 @@ class Engine : private GraphView {
   std::vector<loopd::loop_decision_t> decisionList(bool full);
   Eigen::MatrixXd commonFrameCovariance(const std::vector<Key>& keys);
   void rebuildBackend(const std::string& solver);
-  /// The backend's estimate is not finite: a new backend from the committed graph, started at
-  /// lastGood (if given) and the finite rest (engine_divergence.cpp). Throws if it diverges too.
+  /// If `what` (an update, an idle optimize) left the backend's estimate not finite: logs it
+  /// and puts in a new backend from the committed graph, started at lastGood (if given) and
+  /// the finite rest, and returns true (engine_divergence.cpp). If that rebuild diverges too,
+  /// it is logged and the backend stays as it is.
+  bool recoverIfDiverged(const char* what, const Values* lastGood);
+  /// The rebuild itself; throws if the new backend diverges too.
   void recoverFromDivergence(const Values* lastGood);
   /// Gives a new backend the whole graph (mh: plain factors, optimize, then the groups).
   /// Throws if its estimate is then not finite.

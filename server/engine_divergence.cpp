@@ -50,6 +50,18 @@ bool seedOneMissing(const std::vector<FactorPtr>& factors, Values& initial) {
 
 }  // namespace
 
+bool Engine::recoverIfDiverged(const char* what, const Values* lastGood) {
+  if (backend_->estimate().allFinite()) return false;
+  spdlog::error("the {} solver diverged on {} (NaN or infinite estimate); rebuilding it from {}",
+                backend_->name(), what, lastGood ? "the estimate before" : "the graph before");
+  try {
+    recoverFromDivergence(lastGood);
+  } catch (const std::exception& e) {
+    spdlog::critical("solver could not be rebuilt: {}", e.what());
+  }
+  return true;
+}
+
 void Engine::recoverFromDivergence(const Values* lastGood) {
   const Values& x = backend_->estimate();
   BackendUpdate all;
