@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "server/server.h"
+#include "solvers/core/allocator_tuning.h"
 
 namespace {
 std::atomic<bool> g_stop{false};
@@ -13,6 +14,7 @@ extern "C" void onSignal(int) { g_stop = true; }
 }  // namespace
 
 int main(int argc, char** argv) {
+  loopd::keepFreedMemoryForReuse();
   loopd::server::ServerConfig cfg;
   try {
     cfg = loopd::server::parseServerConfig(std::vector<std::string>(argv + 1, argv + argc));

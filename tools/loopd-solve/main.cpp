@@ -9,6 +9,7 @@
 #include "robust/ambiguous_choice.h"
 #include "robust/backend_registry.h"
 #include "robust/mh_backend.h"
+#include "solvers/core/allocator_tuning.h"
 #include "solvers/io/dataset_reader.h"
 #include "solvers/io/estimate_writer.h"
 #include "solvers/problem/pose_graph_problem.h"
@@ -154,6 +155,7 @@ int run(const tools::SolveOptions& opt) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  keepFreedMemoryForReuse();
   tools::SolveOptions opt;
   try {
     opt = tools::parseSolveOptions(argc, argv);
