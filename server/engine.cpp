@@ -896,7 +896,7 @@ std::vector<Key> Engine::applyUpdate(BackendUpdate u, const std::vector<FactorId
   if (!u.factors.empty() || !u.removals.empty() || !u.ambiguous.empty()) {
     moved = backend_->update(u).moved;
     if (recoverIfDiverged("an update", nullptr))
-      throw std::runtime_error("the solver diverged on it (NaN or infinite estimate)");
+      throw std::runtime_error("the solver diverged on it (NaN, infinite or absurd estimate)");
   }
   moved.insert(moved.end(), newKeys.begin(), newKeys.end());
   return moved;
@@ -1257,8 +1257,8 @@ void Engine::commandError(const loopd::command_t& c, std::int8_t code, const std
 void Engine::feedRebuilt(Backend& next, BackendUpdate all) {
   feedWhole(next, std::move(all));
   // Callers swap `next` in only if this returns: a diverged rebuild leaves the old backend.
-  if (!next.estimate().allFinite())
-    throw std::runtime_error("the rebuilt solver diverged (NaN or infinite estimate)");
+  if (ranAway(next.estimate()))
+    throw std::runtime_error("the rebuilt solver diverged (NaN, infinite or absurd estimate)");
 }
 
 std::unique_ptr<PerFactorRobustBackend> Engine::makeSolver(const std::string& name) const {

@@ -64,8 +64,15 @@ struct Inbound {
 struct EngineCounters {
   std::int64_t accepted = 0, rejected = 0, duplicate = 0, expired = 0, held = 0, updates = 0,
                decodeFailed = 0, internalErrors = 0, journaled = 0;
-  std::int64_t divergences = 0;  // solver steps that left NaN/inf (solver rebuilt, round refused)
+  std::int64_t divergences = 0;  // solver steps that ranAway() (solver rebuilt, round refused)
 };
+
+/// The engine treats an estimate as diverged (a solver that ran away) when a number in it is
+/// NaN, ±inf or beyond 1e12 in magnitude: no map is a million kilometres across, a double
+/// there no longer resolves 0.1 mm, and a runaway passes through such values finite (riSAM on
+/// parking-garage with 100 random wrong closures: 1e3 to 1e188 m in 100 updates, never NaN).
+constexpr double kRunawayMagnitude = 1e12;
+bool ranAway(const Values& estimate);
 
 class Engine : private GraphView {
  public:
@@ -185,15 +192,15 @@ class Engine : private GraphView {
   std::vector<loopd::loop_decision_t> decisionList(bool full);
   Eigen::MatrixXd commonFrameCovariance(const std::vector<Key>& keys);
   void rebuildBackend(const std::string& solver);
-  /// If `what` (an update, an idle optimize) left the backend's estimate not finite: logs it
+  /// If `what` (an update, an idle optimize) left the backend's estimate ranAway(): logs it
   /// and puts in a new backend from the committed graph, started at lastGood (if given) and
-  /// the finite rest, and returns true (engine_divergence.cpp). If that rebuild diverges too,
+  /// the sane rest, and returns true (engine_divergence.cpp). If that rebuild diverges too,
   /// it is logged and the backend stays as it is.
   bool recoverIfDiverged(const char* what, const Values* lastGood);
   /// The rebuild itself; throws if the new backend diverges too.
   void recoverFromDivergence(const Values* lastGood);
   /// Gives a new backend the whole graph (mh: plain factors, optimize, then the groups).
-  /// Throws if its estimate is then not finite.
+  /// Throws if its estimate then ranAway().
   void feedRebuilt(Backend& next, BackendUpdate all);
   void resetAll();
   void regroup(std::vector<Key>& moved);

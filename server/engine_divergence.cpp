@@ -1,6 +1,7 @@
-// A solver step that leaves NaN or infinite values (a measurement of absurd size, a variant
-// that ran away) must not reach the estimate channel or poison every later update: the
-// engine rebuilds the solver from the graph it had before, and the round is refused.
+// A solver step that leaves NaN, infinite or absurd values (ranAway(): a measurement of
+// absurd size, a variant that ran away) must not reach the estimate channel or poison every
+// later update: the engine rebuilds the solver from the graph it had before, and the round
+// is refused.
 #include <spdlog/spdlog.h>
 
 #include <cmath>
@@ -13,9 +14,9 @@ namespace loopd::server {
 
 namespace {
 
-bool finiteSlot(const Values& x, int s) {
+bool saneSlot(const Values& x, int s) {
   for (int i = 0; i < kValueStride; ++i)
-    if (!std::isfinite(x.data(s)[i])) return false;
+    if (!(std::abs(x.data(s)[i]) <= kRunawayMagnitude)) return false;
   return true;
 }
 
@@ -50,10 +51,13 @@ bool seedOneMissing(const std::vector<FactorPtr>& factors, Values& initial) {
 
 }  // namespace
 
+bool ranAway(const Values& estimate) { return !estimate.allWithin(kRunawayMagnitude); }
+
 bool Engine::recoverIfDiverged(const char* what, const Values* lastGood) {
-  if (backend_->estimate().allFinite()) return false;
-  spdlog::error("the {} solver diverged on {} (NaN or infinite estimate); rebuilding it from {}",
-                backend_->name(), what, lastGood ? "the estimate before" : "the graph before");
+  if (!ranAway(backend_->estimate())) return false;
+  spdlog::error(
+      "the {} solver diverged on {} (NaN, infinite or absurd estimate); rebuilding it from {}",
+      backend_->name(), what, lastGood ? "the estimate before" : "the graph before");
   try {
     recoverFromDivergence(lastGood);
   } catch (const std::exception& e) {
@@ -77,13 +81,13 @@ void Engine::recoverFromDivergence(const Values* lastGood) {
     all.ambiguous.push_back(g.factor);
     for (const auto& f : g.factor.alternatives) use(f);
   }
-  // Start from the last good estimate where there is one, else from the finite part of the
+  // Start from the last good estimate where there is one, else from the sane part of the
   // diverged one; the rest is composed along the odometry from its neighbours.
   for (int s = 0; lastGood && s < lastGood->size(); ++s)
-    if (used.count(lastGood->key(s)) && finiteSlot(*lastGood, s))
+    if (used.count(lastGood->key(s)) && saneSlot(*lastGood, s))
       all.initial.insertFrom(*lastGood, s);
   for (int s = 0; s < x.size(); ++s)
-    if (used.count(x.key(s)) && !all.initial.contains(x.key(s)) && finiteSlot(x, s))
+    if (used.count(x.key(s)) && !all.initial.contains(x.key(s)) && saneSlot(x, s))
       all.initial.insertFrom(x, s);
   std::vector<FactorPtr> everything = all.factors;
   for (const auto& a : all.ambiguous)

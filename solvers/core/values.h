@@ -30,6 +30,8 @@ class Values {
   bool contains(Key k) const { return slots_.count(k) != 0; }
   /// False if any stored number is NaN or ±inf (what a diverged solve leaves).
   bool allFinite() const;
+  /// False if any stored number is NaN, ±inf or beyond ±bound in magnitude.
+  bool allWithin(double bound) const;
   /// Slot of k, or −1.
   int slot(Key k) const;
   Key key(int slot) const { return keys_[slot]; }

@@ -524,6 +524,29 @@ TEST(Engine, RefusesARoundThatMakesTheSolverDiverge) {
       for (double v : pose) EXPECT_TRUE(std::isfinite(v));
 }
 
+// A solver that runs away need not pass through NaN (riSAM on parking-garage went from 1e3 to
+// 1e188 m, all finite): an estimate beyond kRunawayMagnitude is treated as diverged too. Plain
+// isam2 put a pose 1e13 m out (finite, chi2 0) where it was published before.
+TEST(Engine, RefusesARoundThatLeavesAnAbsurdButFiniteEstimate) {
+  EngineFixture f("isam2");
+  std::int64_t seq = 0, id = 0;
+  chain(f, "r0", 0, 0, 4, seq, id);
+  const size_t published = f.out.estimates.size();
+  f.send(batch("r0", ++seq, {between2(id++, 0, 4, 0, 5, {1e13, 0, 0})}));
+  ASSERT_FALSE(f.out.errors.empty());
+  EXPECT_EQ(f.out.errors.back().code, loopd::error_t::INTERNAL);
+  EXPECT_NE(f.out.errors.back().reason.find("diverged"), std::string::npos)
+      << f.out.errors.back().reason;
+  EXPECT_EQ(f.poses(), 5);
+  EXPECT_FALSE(ranAway(f.engine.backend().estimate()));
+  EXPECT_GE(f.engine.counters().divergences, 1);
+  f.send(batch("r0", ++seq, {between2(id++, 0, 4, 0, 5, {1, 0, 0.1})}));
+  EXPECT_EQ(f.poses(), 6);
+  for (size_t e = published; e < f.out.estimates.size(); ++e)
+    for (const auto& pose : f.out.estimates[e].poses)
+      for (double v : pose) EXPECT_LE(std::abs(v), kRunawayMagnitude);
+}
+
 // An idle optimize that runs away is rolled back to the estimate before it; nothing
 // non-finite is published and updates go on.
 TEST(Engine, RollsBackAnIdleOptimizeThatDiverges) {

@@ -188,6 +188,14 @@ TEST(Values, AllFiniteFindsNanAndInfinity) {
   inf.data(1)[2] = -std::numeric_limits<double>::infinity();
   EXPECT_FALSE(nan.allFinite());
   EXPECT_FALSE(inf.allFinite());
+  EXPECT_TRUE(v.allWithin(3.0));
+  EXPECT_FALSE(v.allWithin(2.5));  // the landmark's z
+  EXPECT_FALSE(nan.allWithin(1e300));
+  EXPECT_FALSE(inf.allWithin(1e300));
+  Values huge = v;
+  huge.data(0)[0] = -1e13;  // finite, but beyond the bound
+  EXPECT_TRUE(huge.allFinite());
+  EXPECT_FALSE(huge.allWithin(1e12));
 }
 
 TEST(Values, SetInsertFromAssignFrom) {
