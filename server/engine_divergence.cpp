@@ -4,7 +4,6 @@
 // is refused.
 #include <spdlog/spdlog.h>
 
-#include <cmath>
 #include <unordered_set>
 
 #include "server/engine.h"
@@ -13,12 +12,6 @@
 namespace loopd::server {
 
 namespace {
-
-bool saneSlot(const Values& x, int s) {
-  for (int i = 0; i < kValueStride; ++i)
-    if (!(std::abs(x.data(s)[i]) <= kRunawayMagnitude)) return false;
-  return true;
-}
 
 // A part of the graph none of whose variables has a value left: its first variable starts at
 // the origin, the rest is composed from it. False if every variable has a value.
@@ -84,10 +77,11 @@ void Engine::recoverFromDivergence(const Values* lastGood) {
   // Start from the last good estimate where there is one, else from the sane part of the
   // diverged one; the rest is composed along the odometry from its neighbours.
   for (int s = 0; lastGood && s < lastGood->size(); ++s)
-    if (used.count(lastGood->key(s)) && saneSlot(*lastGood, s))
+    if (used.count(lastGood->key(s)) && lastGood->slotWithin(s, kRunawayMagnitude))
       all.initial.insertFrom(*lastGood, s);
   for (int s = 0; s < x.size(); ++s)
-    if (used.count(x.key(s)) && !all.initial.contains(x.key(s)) && saneSlot(x, s))
+    if (used.count(x.key(s)) && !all.initial.contains(x.key(s)) &&
+        x.slotWithin(s, kRunawayMagnitude))
       all.initial.insertFrom(x, s);
   std::vector<FactorPtr> everything = all.factors;
   for (const auto& a : all.ambiguous)

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 namespace loopd {
@@ -29,34 +30,36 @@ const char* varTypeName(VarType t) {
   return "?";
 }
 
-bool Values::allFinite() const {
-  // Branch-free, so it vectorizes: the estimate is checked after every update (allWithin)
-  // (12 µs for 10k poses, against 40 µs with std::isfinite and an early exit). A double is
-  // NaN or ±inf exactly when its exponent bits are all ones.
-  constexpr std::uint64_t kExponent = 0x7ff0000000000000ULL;
-  std::uint64_t bad = 0;
-  for (double x : data_) {
-    std::uint64_t bits;
-    std::memcpy(&bits, &x, sizeof bits);
-    bad |= static_cast<std::uint64_t>((bits & kExponent) == kExponent);
-  }
-  return bad == 0;
-}
+namespace {
 
-bool Values::allWithin(double bound) const {
-  // Integer compare, branch-free like allFinite: for IEEE doubles |x| ≤ bound exactly when
-  // the magnitude bits of x are ≤ those of bound, and NaN/inf magnitudes exceed any finite one.
+// Branch-free, so it vectorizes: the server checks the whole estimate after every update
+// (12 µs for 10k poses, against 40 µs with std::isfinite and an early exit). For IEEE
+// doubles |x| ≤ bound exactly when the magnitude bits of x are ≤ those of bound, and NaN and
+// inf magnitudes exceed any finite one.
+bool magnitudesWithin(const double* x, size_t n, double bound) {
   constexpr std::uint64_t kMagnitude = 0x7fffffffffffffffULL;
   std::uint64_t limit;
   std::memcpy(&limit, &bound, sizeof limit);
   limit &= kMagnitude;
   std::uint64_t bad = 0;
-  for (double x : data_) {
+  for (size_t i = 0; i < n; ++i) {
     std::uint64_t bits;
-    std::memcpy(&bits, &x, sizeof bits);
+    std::memcpy(&bits, &x[i], sizeof bits);
     bad |= static_cast<std::uint64_t>((bits & kMagnitude) > limit);
   }
   return bad == 0;
+}
+
+}  // namespace
+
+bool Values::allFinite() const { return allWithin(std::numeric_limits<double>::max()); }
+
+bool Values::allWithin(double bound) const {
+  return magnitudesWithin(data_.data(), data_.size(), bound);
+}
+
+bool Values::slotWithin(int slot, double bound) const {
+  return magnitudesWithin(data(slot), kValueStride, bound);
 }
 
 int Values::slot(Key k) const {

@@ -32,6 +32,8 @@ class Values {
   bool allFinite() const;
   /// False if any stored number is NaN, ±inf or beyond ±bound in magnitude.
   bool allWithin(double bound) const;
+  /// allWithin for one slot's numbers.
+  bool slotWithin(int slot, double bound) const;
   /// Slot of k, or −1.
   int slot(Key k) const;
   Key key(int slot) const { return keys_[slot]; }

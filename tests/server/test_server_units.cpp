@@ -456,9 +456,12 @@ enum class Runaway { HugeChi2, Optimize, Always };
 
 class RunawayBackend : public DecoratorBackend {
  public:
-  explicit RunawayBackend(Runaway when)
-      : DecoratorBackend(std::make_unique<Isam2Backend>(), "RunawayBackend"), when_(when) {}
-  std::string name() const override { return "runaway"; }
+  RunawayBackend(Runaway when, std::string name)
+      : DecoratorBackend(std::make_unique<Isam2Backend>(), "RunawayBackend"),
+        when_(when),
+        name_(std::move(name)) {}
+  // The registered name: the engine rebuilds a diverged solver by name.
+  std::string name() const override { return name_; }
   UpdateResult update(const BackendUpdate& u) override {
     const UpdateResult r = inner_->update(u);
     commitOriginals(u, {u.removals.begin(), u.removals.end()});
@@ -478,6 +481,7 @@ class RunawayBackend : public DecoratorBackend {
       std::fill_n(nan_.data(s), kValueStride, std::numeric_limits<double>::quiet_NaN());
   }
   Runaway when_;
+  std::string name_;
   Values nan_;
 };
 
@@ -486,9 +490,10 @@ void registerRunawayBackends() {
     for (const auto& [name, when] :
          {std::pair{"runaway", Runaway::HugeChi2}, std::pair{"runaway-optimize", Runaway::Optimize},
           std::pair{"runaway-always", Runaway::Always}})
-      registerBackend({name, "test: a NaN estimate", true}, [when = when](const BackendOptions&) {
-        return std::make_unique<RunawayBackend>(when);
-      });
+      registerBackend({name, "test: a NaN estimate", true},
+                      [when = when, name = std::string(name)](const BackendOptions&) {
+                        return std::make_unique<RunawayBackend>(when, name);
+                      });
     return true;
   }();
   ASSERT_TRUE(registered);
