@@ -22,11 +22,12 @@ namespace loopd {
 class RisamSigFactor final : public Factor {
  public:
   template <size_t... I>
-  RisamSigFactor(std::index_sequence<I...>, FactorPtr inner, double mu, double c, const Values* at)
+  RisamSigFactor(std::index_sequence<I...>, FactorPtr inner, double mu, SigShape shape,
+                 const Values* at)
       : Factor({{inner->key(I), inner->varType(I)}...}, inner->dim(), inner->role()),
         inner_(std::move(inner)),
         mu_(mu),
-        c_(c),
+        shape_(shape),
         at_(at) {
     setId(inner_->id());
   }
@@ -36,7 +37,7 @@ class RisamSigFactor final : public Factor {
     double c2 = 0.0;
     for (int k = 0; k < dim(); ++k) c2 += r[k] * r[k];
     const double e = chi2AtEstimate();
-    const double w = sigWeight(e >= 0.0 ? e : c2, mu_, c_);
+    const double w = shape_.weight(e >= 0.0 ? e : c2, mu_);
     const double s = std::sqrt(w);
     for (int k = 0; k < dim(); ++k) r[k] *= s;
     if (J == nullptr) return;
@@ -73,15 +74,15 @@ class RisamSigFactor final : public Factor {
 
   FactorPtr inner_;
   mutable double mu_;
-  double c_;
+  SigShape shape_;
   const Values* at_;
 };
 
 namespace {
 
 template <size_t N>
-FactorPtr makeSig(const FactorPtr& f, double mu, double c, const Values* at, FactorId id) {
-  auto w = std::make_shared<RisamSigFactor>(std::make_index_sequence<N>{}, f, mu, c, at);
+FactorPtr makeSig(const FactorPtr& f, double mu, SigShape shape, const Values* at, FactorId id) {
+  auto w = std::make_shared<RisamSigFactor>(std::make_index_sequence<N>{}, f, mu, shape, at);
   w->setId(id);
   return w;
 }
@@ -113,6 +114,7 @@ double RisamBackend::nextMu(double mu) const {
 
 double RisamBackend::shapeSquared(int dim) const {
   if (options_.shape > 0.0) return options_.shape * options_.shape;
+  if (tight_) return tightChi2(gate_, dim);
   const double d = chi2Quantile(std::max(dim, 1), 0.95);
   return gate_ > 0.0 && options_.widenShape
              ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5))
@@ -121,7 +123,17 @@ double RisamBackend::shapeSquared(int dim) const {
 
 double RisamBackend::rejectChi2(int dim) const {
   const double d = chi2Quantile(std::max(dim, 1), options_.rejectChi2Probability);
+  if (tight_) return tightChi2(atTail_ ? tail_ : gate_, dim);
   return gate_ > 0.0 ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5)) : d;
+}
+
+double RisamBackend::tailChi2(int dim) const {
+  return tight_ ? tightChi2(tail_, dim) : rejectChi2(dim);
+}
+
+double RisamBackend::tightChi2(double gate, int dim) const {
+  return std::min(gate * chi2Quantile(std::max(dim, 1), 0.5),
+                  chi2Quantile(std::max(dim, 1), 0.95) / options_.widenFactor);
 }
 
 void RisamBackend::refreshGate() {
@@ -137,26 +149,48 @@ void RisamBackend::refreshGate() {
   }
   gateAtCount_ = graduated_.size();
   const TailGate t = tailGate(q, options_.tailExponent, options_.medianFactor);
-  // Widen only (heavy tails); never narrower than the χ²_dim defaults.
-  bool wider = false;
-  for (int dim = 1; dim <= 6 && t.gate > 0.0; ++dim)
-    if (t.gate * chi2Quantile(dim, 0.5) > options_.widenFactor * chi2Quantile(dim, 0.95))
-      wider = true;
-  if (wider && t.gate > gate_) gate_ = t.gate;
+  // Wider (heavy tails): only ever widened. Tighter for every dimension (under-confident
+  // information, with `tighten`): from then on it follows the estimate and stays tight (the
+  // online scale swings with drift: parking-garage local 100 went 0.01 → 24 → 0.001, and
+  // widening in the swing let wrong closures bend the map).
+  if (!(t.gate > 0.0)) return;
+  bool wider = false, tighter = options_.tighten;
+  for (int dim = 1; dim <= 6; ++dim) {
+    const double g = t.gate * chi2Quantile(dim, 0.5), d = chi2Quantile(dim, 0.95);
+    wider = wider || g > options_.widenFactor * d;
+    tighter = tighter && g * options_.widenFactor < d;
+  }
+  if (tight_ || tighter) {
+    gate_ = t.gate;
+    tail_ = tailGate(std::move(q), options_.tailExponent, 1e300).gate;
+    tight_ = true;
+  } else if (wider && t.gate > gate_) {
+    gate_ = t.gate;
+  }
+}
+
+SigShape RisamBackend::sigShape(int dim) const {
+  const double effective = shapeSquared(dim);
+  if (!tight_) return {std::sqrt(effective), 1.0};
+  // The default shape on χ² scaled up: the same weights at μ = 1 as c² = `effective`, but the
+  // convex end keeps closures in (c²/(c² + 1) at μ = 0: 0.93 instead of 0.008 on
+  // parking-garage), so graduation starts from the least-squares map, not the odometry alone.
+  const double base = chi2Quantile(std::max(dim, 1), 0.95);
+  return {std::sqrt(base), base / effective};
 }
 
 FactorPtr RisamBackend::wrap(const FactorPtr& f, double mu, FactorId internal) const {
-  const double c = std::sqrt(shapeSquared(f->dim()));
+  const SigShape shape = sigShape(f->dim());
   const Values* at = options_.weightAtEstimate ? &inner_->estimate() : nullptr;
   switch (f->size()) {
     case 1:
-      return makeSig<1>(f, mu, c, at, internal);
+      return makeSig<1>(f, mu, shape, at, internal);
     case 2:
-      return makeSig<2>(f, mu, c, at, internal);
+      return makeSig<2>(f, mu, shape, at, internal);
     case 3:
-      return makeSig<3>(f, mu, c, at, internal);
+      return makeSig<3>(f, mu, shape, at, internal);
     case 4:
-      return makeSig<4>(f, mu, c, at, internal);
+      return makeSig<4>(f, mu, shape, at, internal);
     default:
       throw std::invalid_argument("risam: factor with " + std::to_string(f->size()) + " keys");
   }
@@ -168,8 +202,10 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   for (const FactorPtr& f : u.factors)
     if (f && isUncertain(f->role())) ++incoming;
   if (incoming > 0 && graduated_.size() + incoming >
-                          static_cast<size_t>((1.0 + options_.gateRefreshGrowth) * gateAtCount_))
+                          static_cast<size_t>((1.0 + options_.gateRefreshGrowth) * gateAtCount_)) {
     refreshGate();  // the shape the new factors are graduated with
+    regraduateIfTightened();
+  }
   std::unordered_set<FactorId> removing(u.removals.begin(), u.removals.end());
   BackendUpdate first;
   first.initial = u.initial;
@@ -309,7 +345,7 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     const Values& x = inner_->estimate();
     for (FactorId id : activeIds) {
       const Factor& f = *graduated_[id].original;
-      if (!(f.chi2(x) <= options_.absorbedFraction * rejectChi2(f.dim()))) return false;
+      if (!(f.chi2(x) <= options_.absorbedFraction * tailChi2(f.dim()))) return false;
     }
     if (checkNeighbours)
       for (size_t n = 0; n < neighbours.size(); ++n) {
@@ -324,9 +360,10 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     std::vector<FactorId> readd;
     for (FactorId id : activeIds) {
       Graduated& g = graduated_[id];
-      const double c2 = g.original->chi2(x), c = std::sqrt(shapeSquared(g.original->dim()));
-      const double w0 = sigWeight(c2, g.mu, c), w1 = sigWeight(c2, 1.0, c);
-      if (std::abs(w1 - w0) <= options_.promoteTolerance * w0) {
+      const double c2 = g.original->chi2(x);
+      const SigShape shape = sigShape(g.original->dim());
+      const double w0 = shape.weight(c2, g.mu), w1 = shape.weight(c2, 1.0);
+      if (tight_ || std::abs(w1 - w0) <= options_.promoteTolerance * w0) {
         static_cast<const RisamSigFactor&>(*g.wrapper).setMu(1.0);
         g.mu = 1.0;
       } else {
@@ -365,7 +402,10 @@ void RisamBackend::optimize() {
     return;
   }
   gateAtCount_ = 0;
+  atTail_ = false;
   refreshGate();
+  regraduateIfTightened();
+  atTail_ = tight_;
   // Rejected closures that the map's own uncertainty explains are graduated again (online
   // machinery: inner updates only).
   if (options_.retryRejected && graduated_.size() != retriedAtCount_) {
@@ -450,6 +490,7 @@ double RisamBackend::truncatedCost() const {
 void RisamBackend::restoreGraduated() {
   if (!finalized_) return;
   finalized_ = false;
+  atTail_ = false;
   std::vector<FactorId> ids;
   for (const auto& [id, g] : graduated_)
     if (g.decided) ids.push_back(id);
@@ -497,9 +538,11 @@ std::vector<FactorId> RisamBackend::retryCandidates() {
     if (it == graduated_.end()) continue;
     ++tested;
     const Factor& f = *it->second.original;
-    if (predictedChi2(f) <= std::max(chi2Quantile(std::max(f.dim(), 1), options_.retryProbability),
-                                     rejectChi2(f.dim())))
-      out.push_back(id);
+    const double retry =
+        tight_ ? rejectChi2(f.dim())
+               : std::max(chi2Quantile(std::max(f.dim(), 1), options_.retryProbability),
+                          rejectChi2(f.dim()));
+    if (predictedChi2(f) <= retry) out.push_back(id);
   }
   return out;
 }
@@ -507,18 +550,35 @@ std::vector<FactorId> RisamBackend::retryCandidates() {
 int RisamBackend::retryRejected() {
   const std::vector<FactorId> retry = retryCandidates();
   if (retry.empty()) return 0;
-  // Graduate them again from μ_init, as new arrivals.
+  graduateAgain(retry, tight_);
+  retried_ += static_cast<int>(retry.size());
+  return static_cast<int>(retry.size());
+}
+
+void RisamBackend::graduateAgain(const std::vector<FactorId>& ids, bool converge) {
   double mu = options_.muInit;
   int extra = options_.extraIterations;
   bool first = true;
   while (first || mu < 1.0 || extra-- > 0) {
     if (!first) mu = nextMu(mu);
     first = false;
-    const BackendUpdate step = regraduate(retry, mu);
-    inner_->update(step);
+    if (converge && innerIsam2_) innerIsam2_->relinearizeNextUpdate();
+    inner_->update(regraduate(ids, mu));
+    if (converge) inner_->optimize();
   }
-  retried_ += static_cast<int>(retry.size());
-  return static_cast<int>(retry.size());
+}
+
+void RisamBackend::regraduateIfTightened() {
+  if (!tight_ ||
+      (regraduatedAtGate_ > 0.0 && gate_ * options_.regraduateFactor >= regraduatedAtGate_))
+    return;
+  regraduatedAtGate_ = gate_;
+  std::vector<FactorId> all;
+  all.reserve(graduated_.size());
+  for (const auto& [id, g] : graduated_) all.push_back(id);
+  // Converged at each μ: one Gauss–Newton step per μ with every closure's weight changing at
+  // once ran away (RisamOnline.RegraduatesEveryClosureWithoutRunningAway…).
+  if (!all.empty()) graduateAgain(all, true);
 }
 
 std::vector<std::pair<FactorId, double>> RisamBackend::decisions() const {
@@ -528,9 +588,9 @@ std::vector<std::pair<FactorId, double>> RisamBackend::decisions() const {
   for (const auto& f : originals_.factors()) {
     auto it = graduated_.find(f->id());
     if (it != graduated_.end())
-      out.emplace_back(f->id(), it->second.decided ? it->second.mu
-                                                   : sigWeight(f->chi2(x), it->second.mu,
-                                                               std::sqrt(shapeSquared(f->dim()))));
+      out.emplace_back(f->id(), it->second.decided
+                                    ? it->second.mu
+                                    : sigShape(f->dim()).weight(f->chi2(x), it->second.mu));
   }
   return out;
 }

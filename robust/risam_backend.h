@@ -26,6 +26,12 @@
 namespace loopd {
 
 class RisamSigFactor;  // the SIG wrapper (risam_backend.cpp)
+
+/// The SIG kernel's shape c applied to χ² scaled by chi2Scale.
+struct SigShape {
+  double c = 0.0, chi2Scale = 1.0;
+  double weight(double chi2, double mu) const { return sigWeight(chi2Scale * chi2, mu, c); }
+};
 class Isam2Backend;
 
 struct RisamOptions {
@@ -47,6 +53,19 @@ struct RisamOptions {
   /// Also widen the SIG shape c² to the gate. Off: on manhattan + 100 random outliers it let
   /// one outlier in (ATE 4.8 m); with the default shape every outlier is rejected.
   bool widenShape = false;
+  /// Under-confident information (parking-garage: true closures at 10⁻⁵ of χ²_dim, so a wrong
+  /// closure bends the flexible map until it fits the χ²_dim defaults): once the gate
+  /// g·χ²_dim(0.5) is below χ²_dim(0.95)/widenFactor for every dimension, the SIG shape c² (at
+  /// μ = 1; see sigShape) and the online rejection and retry tests become g·χ²_dim(0.5) (at
+  /// most χ²_dim(0.95)/widenFactor), and stay tight. The accepted closures' uncapped tail
+  /// q99·(q99/q90)^e·χ²_dim(0.5), with the same bound, is what an arrival must fit to count as
+  /// absorbed and what optimize() decides against: parking-garage's true closures reach 208×
+  /// their median (GncOptions::tighten and readmit).
+  bool tighten = true;
+  /// With tighten: every uncertain factor is graduated again at the tightened shape (the inner
+  /// backend optimized at each μ) when the gate first tightens and whenever it has fallen by
+  /// more than this factor since.
+  double regraduateFactor = 10.0;
   /// An update whose new uncertain factors all have χ² ≤ consistentFraction·(rejection
   /// threshold) at the current estimate (new variables at their initial values) adds them at
   /// μ = 1 with no graduation and no neighbour reset: one inner update instead of six.
@@ -84,7 +103,10 @@ struct RisamOptions {
   /// relinearization of their far ends).
   bool lazyNeighbours = true;
   /// An absorbed arrival goes from μ_init to μ = 1 in place (no inner update) when that
-  /// changes its SIG weight at the estimate by at most this fraction.
+  /// changes its SIG weight at the estimate by at most this fraction. With a tightened gate,
+  /// always: an absorbed arrival fits the tail test, but the tight shape weighs it differently
+  /// at μ_init and μ = 1, and re-adding cost an inner update per closure (parking-garage:
+  /// 2.0× plain isam2 instead of 1.5×).
   double promoteTolerance = 0.5;
   /// The steps of a graduation schedule (an arrival the convex step did not absorb) always
   /// relinearize an inner iSAM2; other updates follow its relinearizeSkip (the registry's
@@ -123,13 +145,29 @@ class RisamBackend : public DecoratorBackend {
   /// The inner update that re-adds each of ids at μ under a fresh internal id.
   BackendUpdate regraduate(const std::vector<FactorId>& ids, double mu);
   double shapeSquared(int dim) const;
+  /// The kernel graduated factors use: c² = shapeSquared, or once tightened the default c²
+  /// on χ² scaled so that μ = 1 weighs as c² = shapeSquared does.
+  SigShape sigShape(int dim) const;
   double rejectChi2(int dim) const;
+  /// With tight_: the tail test (optimize()'s rejection test, and what an arrival must fit to
+  /// count as absorbed); otherwise rejectChi2.
+  double tailChi2(int dim) const;
+  /// A tightened gate as χ²: g·χ²_dim(0.5), at most χ²_dim(0.95)/widenFactor.
+  double tightChi2(double gate, int dim) const;
   void refreshGate();
   double predictedChi2(const Factor& f);
   /// Rejected closures (at most retryMaxTests tested) whose predicted χ² increase passes the
   /// retry test: what retryRejected() and optimize()'s candidate rounds put back.
   std::vector<FactorId> retryCandidates();
   int retryRejected();
+  /// Graduates ids again from μ_init along the schedule, as new arrivals; with `converge`,
+  /// the inner backend relinearizes and optimizes to convergence at each μ (tightened: the
+  /// retry's single steps ran parking-garage:800 + 30 random away, χ² 4e15).
+  void graduateAgain(const std::vector<FactorId>& ids, bool converge);
+  /// Every uncertain factor graduated again, when the gate first tightens or has fallen by
+  /// more than regraduateFactor since the last time: closures accepted under the wider shape
+  /// (before the noise scale was known) bent the map before it could reject them.
+  void regraduateIfTightened();
   /// After optimize(): every decided closure back to its SIG kernel at μ = 1.
   void restoreGraduated();
   /// Installs 0/1 decisions (χ² test at the estimate; the ids in include forced to 1 in the
@@ -150,6 +188,10 @@ class RisamBackend : public DecoratorBackend {
   int retried_ = 0;
   size_t retriedAtCount_ = 0;
   double gate_ = 0.0;                   // noise-aware gate (normalized), 0 = defaults
+  bool tight_ = false;                  // gate_ is below the defaults (tighten)
+  double tail_ = 0.0;                   // with tight_: the uncapped tail gate (normalized)
+  bool atTail_ = false;                 // optimize(): tight_ decisions against tail_
+  double regraduatedAtGate_ = 0.0;      // gate_ of the last regraduateIfTightened (0: none)
   size_t gateAtCount_ = 0;              // number of uncertain factors at the last refresh
   bool finalized_ = false;              // optimize() left decided (fixed-weight) closures in
   Isam2Backend* innerIsam2_ = nullptr;  // the inner backend, if it is an iSAM2
