@@ -113,10 +113,11 @@ struct GncOptions {
 };
 
 /// Noise scale and tail gate of normalized χ² values q_i = χ²_i/χ²_{dim_i}(0.5): scale = the
-/// median (1 for honest information, < 1 under-confident, > 1 over-confident), gate =
-/// min(medianFactor·median, q99·(q99/q90)^exponent). Both 0 with fewer than 10 values.
+/// median (1 for honest information, < 1 under-confident, > 1 over-confident), tail =
+/// q99·(q99/q90)^exponent, gate = min(medianFactor·median, tail). All 0 with fewer than 10
+/// values.
 struct TailGate {
-  double scale = 0.0, gate = 0.0;
+  double scale = 0.0, gate = 0.0, tail = 0.0;
 };
 TailGate tailGate(std::vector<double> q, double exponent, double medianFactor);
 

@@ -21,7 +21,8 @@ TailGate tailGate(std::vector<double> q, double exponent, double medianFactor) {
   t.scale = at(0.5);
   const double p90 = at(0.9), p99 = at(0.99);
   if (!(p90 > 0.0)) return t;
-  t.gate = std::min(medianFactor * t.scale, p99 * std::pow(p99 / p90, exponent));
+  t.tail = p99 * std::pow(p99 / p90, exponent);
+  t.gate = std::min(medianFactor * t.scale, t.tail);
   return t;
 }
 

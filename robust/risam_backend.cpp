@@ -80,15 +80,6 @@ class RisamSigFactor final : public Factor {
 
 namespace {
 
-// The largest number in the estimate: its extent in metres once beyond 1 (rotations, angles
-// and switch values stay near 1).
-double largestMagnitude(const Values& x) {
-  double m = 0.0;
-  for (int s = 0; s < x.size(); ++s)
-    for (int k = 0; k < kValueStride; ++k) m = std::max(m, std::abs(x.data(s)[k]));
-  return m;
-}
-
 template <size_t N>
 FactorPtr makeSig(const FactorPtr& f, double mu, SigShape shape, const Values* at, FactorId id) {
   auto w = std::make_shared<RisamSigFactor>(std::make_index_sequence<N>{}, f, mu, shape, at);
@@ -131,8 +122,8 @@ double RisamBackend::shapeSquared(int dim) const {
 }
 
 double RisamBackend::rejectChi2(int dim) const {
-  const double d = chi2Quantile(std::max(dim, 1), options_.rejectChi2Probability);
   if (tight_) return tightChi2(atTail_ ? tail_ : gate_, dim);
+  const double d = chi2Quantile(std::max(dim, 1), options_.rejectChi2Probability);
   return gate_ > 0.0 ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5)) : d;
 }
 
@@ -171,7 +162,7 @@ void RisamBackend::refreshGate() {
   }
   if (tight_ || tighter) {
     gate_ = t.gate;
-    tail_ = tailGate(std::move(q), options_.tailExponent, 1e300).gate;
+    tail_ = t.tail;
     tight_ = true;
   } else if (wider && t.gate > gate_) {
     gate_ = t.gate;
@@ -339,12 +330,12 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   auto step = [&](const BackendUpdate& s, bool graduating) {
     if (graduating && innerIsam2_ && options_.relinearizeGraduation)
       innerIsam2_->relinearizeNextUpdate();
-    const double before = graduating && tight_ ? largestMagnitude(inner_->estimate()) : 0.0;
+    const double before = graduating && tight_ ? inner_->estimate().largestMagnitude() : 0.0;
     const UpdateResult r = inner_->update(s);
     // Tightened, the kernel's weights are steep in χ², and one Gauss–Newton step per μ can
     // overshoot (parking-garage local 1000: 334 m → 1e300 m over four arrivals); a step that
     // doubles the map's extent is followed by the inner backend's own optimize().
-    if (graduating && tight_ && largestMagnitude(inner_->estimate()) > 2.0 * before)
+    if (graduating && tight_ && inner_->estimate().largestMagnitude() > 2.0 * before)
       inner_->optimize();
     result.seconds += r.seconds;
     result.relinearized += r.relinearized;

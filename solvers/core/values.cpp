@@ -1,6 +1,7 @@
 #include "solvers/core/values.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <limits>
@@ -60,6 +61,12 @@ bool Values::allWithin(double bound) const {
 
 bool Values::slotWithin(int slot, double bound) const {
   return magnitudesWithin(data(slot), kValueStride, bound);
+}
+
+double Values::largestMagnitude() const {
+  double m = 0.0;
+  for (double x : data_) m = std::max(m, std::abs(x));
+  return m;
 }
 
 int Values::slot(Key k) const {

@@ -34,6 +34,9 @@ class Values {
   bool allWithin(double bound) const;
   /// allWithin for one slot's numbers.
   bool slotWithin(int slot, double bound) const;
+  /// The largest magnitude of a stored number, NaN skipped: the map's extent in metres once
+  /// beyond 1 (rotations, angles and switch values stay near 1).
+  double largestMagnitude() const;
   /// Slot of k, or −1.
   int slot(Key k) const;
   Key key(int slot) const { return keys_[slot]; }

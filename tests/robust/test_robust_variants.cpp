@@ -224,6 +224,7 @@ TEST(TailGate, MedianAndTailOfNormalizedChi2) {
   const double q90 = 1.0, q99 = 1.0 + 0.1 * 90;  // q[900], q[990]
   EXPECT_NEAR(t.gate, q99 * std::pow(q99 / q90, 3.0), 1e-9);
   EXPECT_NEAR(tailGate(q, 3.0, 10.0).gate, 10.0 * t.scale, 1e-9);  // capped by the median
+  EXPECT_NEAR(tailGate(q, 3.0, 10.0).tail, q99 * std::pow(q99 / q90, 3.0), 1e-9);  // uncapped
   EXPECT_EQ(tailGate({1, 2, 3}, 3.0, 100.0).gate, 0.0);            // too few values
 }
 

@@ -196,6 +196,9 @@ TEST(Values, AllFiniteFindsNanAndInfinity) {
   huge.data(0)[0] = -1e13;  // finite, but beyond the bound
   EXPECT_TRUE(huge.allFinite());
   EXPECT_FALSE(huge.allWithin(1e12));
+  EXPECT_EQ(v.largestMagnitude(), 3.0);  // the landmark's z
+  EXPECT_EQ(huge.largestMagnitude(), 1e13);
+  EXPECT_EQ(nan.largestMagnitude(), 3.0);  // NaN skipped
 }
 
 TEST(Values, SetInsertFromAssignFrom) {
