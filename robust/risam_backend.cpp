@@ -98,7 +98,10 @@ BackendUpdate RisamBackend::regraduate(const std::vector<FactorId>& ids, double 
   BackendUpdate step;
   for (FactorId id : ids) {
     Graduated& g = graduated_[id];
-    step.removals.push_back(g.internalId);
+    if (g.parked)
+      unpark(id);
+    else
+      step.removals.push_back(g.internalId);
     g.internalId = kInternalIdBit | nextInternal_++;
     g.wrapper = wrap(g.original, mu, g.internalId);
     g.mu = mu;
@@ -106,6 +109,26 @@ BackendUpdate RisamBackend::regraduate(const std::vector<FactorId>& ids, double 
     step.factors.push_back(g.wrapper);
   }
   return step;
+}
+
+void RisamBackend::unpark(FactorId id) {
+  graduated_[id].parked = false;
+  parked_.erase(std::find(parked_.begin(), parked_.end(), id));
+}
+
+bool RisamBackend::farOut(const Graduated& g, const Values& x) const {
+  if (!(options_.parkFactor > 0.0) || g.parked || g.decided) return false;
+  return g.original->chi2(x) > options_.parkFactor * tailChi2(g.original->dim());
+}
+
+bool RisamBackend::shouldPark(FactorId id) {
+  auto it = graduated_.find(id);
+  if (it == graduated_.end() || !farOut(it->second, inner_->estimate())) return false;
+  // Only where the map is sure: on a flexible map (parking-garage) true closures sit at χ² in
+  // the thousands while wrong ones bend it, but within a few tail gates of the map's own
+  // uncertainty; left in, their small weights pull the map back as it straightens.
+  const Factor& f = *it->second.original;
+  return predictedChi2(f) > options_.parkPredictedFactor * tailChi2(f.dim());
 }
 
 double RisamBackend::nextMu(double mu) const {
@@ -207,6 +230,23 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     regraduateIfTightened();
   }
   std::unordered_set<FactorId> removing(u.removals.begin(), u.removals.end());
+  // Far-out factors leave the inner backend with this update; parked ones that fit the
+  // current estimate come back at μ = 1, where their SIG weight would have recovered had they
+  // stayed in.
+  std::vector<FactorId> parking, unparking;
+  std::unordered_set<FactorId> leaving, unparkingSet;
+  for (FactorId id : toPark_)
+    if (!removing.count(id) && !leaving.count(id) && shouldPark(id)) {
+      parking.push_back(id);
+      leaving.insert(id);
+    }
+  for (FactorId id : parked_) {
+    const Factor& f = *graduated_.at(id).original;
+    if (!removing.count(id) && f.chi2(inner_->estimate()) <= tailChi2(f.dim())) {
+      unparking.push_back(id);
+      unparkingSet.insert(id);
+    }
+  }
   BackendUpdate first;
   first.initial = u.initial;
   FactorId nextInternal = nextInternal_;
@@ -238,8 +278,12 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   }
   for (FactorId id : u.removals) {
     auto it = graduated_.find(id);
-    first.removals.push_back(it == graduated_.end() ? id : it->second.internalId);
+    if (it == graduated_.end())
+      first.removals.push_back(id);
+    else if (!it->second.parked)
+      first.removals.push_back(it->second.internalId);
   }
+  for (FactorId id : parking) first.removals.push_back(graduated_[id].internalId);
   // The active set: new uncertain factors, plus existing ones sharing a variable with them.
   std::vector<Graduated> active;
   std::vector<FactorId> activeIds;  // original ids, parallel to active
@@ -263,11 +307,22 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     activeIds.push_back(f->id());
     inActive.insert(f->id());
   }
+  std::vector<Graduated> returning;  // unparking, committed with the update
+  for (FactorId id : unparking) {
+    Graduated g = graduated_[id];
+    g.parked = false;
+    g.internalId = newInternal();
+    g.mu = 1.0;
+    g.wrapper = wrap(g.original, g.mu, g.internalId);
+    first.factors.push_back(g.wrapper);
+    returning.push_back(g);
+  }
   // Existing uncertain factors sharing a variable with the new ones (riSAM resets them to
   // μ_init with the arrival). With lazyNeighbours they are only reset if the arrival is not
   // absorbed at its own convex step or that step pushed one of them out (below).
   std::vector<FactorId> neighbours;
-  std::vector<double> neighbourChi2;  // before the update, at the estimate
+  std::vector<double> neighbourChi2;       // before the update, at the estimate
+  std::vector<FactorId> parkedNeighbours;  // join the graduation like the others, if it runs
   if (options_.graduateNeighbours && !active.empty() && !consistent) {
     const size_t numNew = active.size();
     for (size_t a = 0; a < numNew; ++a) {
@@ -281,10 +336,15 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
         auto it = byKey_.find(near);
         if (it == byKey_.end()) continue;
         for (FactorId id : it->second) {
-          if (inActive.count(id) || removing.count(id)) continue;
+          if (inActive.count(id) || removing.count(id) || leaving.count(id)) continue;
           auto g = graduated_.find(id);
           if (g == graduated_.end()) continue;
+          if (g->second.parked && (!options_.lazyNeighbours || unparkingSet.count(id))) continue;
           inActive.insert(id);
+          if (g->second.parked) {
+            parkedNeighbours.push_back(id);
+            continue;
+          }
           if (options_.lazyNeighbours) {
             neighbours.push_back(id);
             neighbourChi2.push_back(g->second.original->chi2(inner_->estimate()));
@@ -311,6 +371,19 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   nextInternal_ = nextInternal;
   commitOriginals(u, removing);
   for (FactorId id : u.removals) graduated_.erase(id);
+  parked_.erase(std::remove_if(parked_.begin(), parked_.end(),
+                               [&](FactorId id) { return removing.count(id) > 0; }),
+                parked_.end());
+  for (Graduated& g : returning) {
+    const FactorId id = g.original->id();
+    graduated_[id] = g;
+    parked_.erase(std::find(parked_.begin(), parked_.end(), id));
+  }
+  for (FactorId id : parking) {
+    graduated_[id].parked = true;
+    parked_.push_back(id);
+  }
+  toPark_.clear();
   for (size_t a = 0; a < active.size(); ++a) {
     const bool isNew = graduated_.find(activeIds[a]) == graduated_.end();
     graduated_[activeIds[a]] = active[a];
@@ -383,8 +456,10 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     promote();
     return result;
   }
+  const Values& x = inner_->estimate();  // `x` stays current: a reference to the inner estimate
   // Not absorbed: the neighbours join the active set at μ_init (one more convex step), then
   // the schedule, cut short once everything is absorbed.
+  neighbours.insert(neighbours.end(), parkedNeighbours.begin(), parkedNeighbours.end());
   if (!neighbours.empty()) {
     step(regraduate(neighbours, options_.muInit), true);
     activeIds.insert(activeIds.end(), neighbours.begin(), neighbours.end());
@@ -396,9 +471,11 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     step(regraduate(activeIds, mu), true);
     if (mu < 1.0 && absorbedNow(false)) {
       promote();
-      break;
+      return result;
     }
   }
+  for (FactorId id : activeIds)
+    if (farOut(graduated_[id], x)) toPark_.push_back(id);
   return result;
 }
 
@@ -448,13 +525,18 @@ void RisamBackend::forceDecisions(const std::unordered_set<FactorId>& ids, doubl
   for (FactorId id : ids) {
     auto it = graduated_.find(id);
     if (it == graduated_.end()) continue;
-    setDecided(it->second, w, step);
+    setDecided(id, w, step);
   }
   if (!step.factors.empty()) inner_->update(step);
 }
 
-void RisamBackend::setDecided(Graduated& g, double w, BackendUpdate& step) {
-  step.removals.push_back(g.internalId);
+void RisamBackend::setDecided(FactorId id, double w, BackendUpdate& step) {
+  Graduated& g = graduated_[id];
+  if (g.parked && w == 0.0) return;  // already out
+  if (g.parked)
+    unpark(id);
+  else
+    step.removals.push_back(g.internalId);
   g.internalId = kInternalIdBit | nextInternal_++;
   auto wf = WeightedFactor::make(g.original, w);
   wf->setId(g.internalId);
@@ -475,7 +557,7 @@ void RisamBackend::decideAndSolve(const std::vector<FactorId>* include) {
           (round == 0 && forced.count(id)) || g.original->chi2(x) <= rejectChi2(g.original->dim());
       const double w = accept ? 1.0 : 0.0;
       if (g.decided && g.mu == w) continue;
-      setDecided(g, w, step);
+      setDecided(id, w, step);
     }
     if (step.factors.empty() && round > 0) break;
     if (!step.factors.empty()) inner_->update(step);
@@ -572,6 +654,9 @@ void RisamBackend::graduateAgain(const std::vector<FactorId>& ids, bool converge
     inner_->update(regraduate(ids, mu));
     if (converge) inner_->optimize();
   }
+  const Values& x = inner_->estimate();
+  for (FactorId id : ids)
+    if (farOut(graduated_[id], x)) toPark_.push_back(id);
 }
 
 void RisamBackend::regraduateIfTightened() {
@@ -581,7 +666,7 @@ void RisamBackend::regraduateIfTightened() {
   regraduatedAtGate_ = gate_;
   std::vector<FactorId> all;
   all.reserve(graduated_.size());
-  for (const auto& [id, g] : graduated_) all.push_back(id);
+  for (const auto& [id, g] : graduated_) all.push_back(id);  // parked ones too
   // Converged at each μ: one Gauss–Newton step per μ with every closure's weight changing at
   // once ran away (RisamOnline.RegraduatesEveryClosureWithoutRunningAway…).
   if (!all.empty()) graduateAgain(all, true);

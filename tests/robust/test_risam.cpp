@@ -11,10 +11,13 @@
 
 #include "robust/backend_registry.h"
 #include "robust/risam_backend.h"
+#include "solvers/factors/between_factor_se2.h"
+#include "solvers/incremental/isam2.h"
 #include "solvers/problem/incremental_schedule.h"
 #include "solvers/problem/initial_guess.h"
 #include "solvers/problem/pose_graph_problem.h"
 #include "tests/robust/dataset_prefix.h"
+#include "tests/robust/square_walk.h"
 #include "tools/loopd-outliers/outlier_generator.h"
 
 namespace loopd {
@@ -28,9 +31,20 @@ struct OnlineCounts {
   double trustedChi2 = 0.0;  // odometry and priors after optimize()
 };
 
-OnlineCounts runOnline(const PoseGraphProblem& p) {
-  const std::unique_ptr<Backend> backend = makeBackend("risam");
-  auto& b = dynamic_cast<RisamBackend&>(*backend);
+// riSAM over an iSAM2 as the registry builds it, with `options`; `isam` (if given) is pointed
+// at the inner iSAM2.
+std::unique_ptr<RisamBackend> makeRisam(RisamOptions options, Isam2Backend** isam = nullptr) {
+  Isam2Options io;
+  io.urgentRelinearizeThreshold = 1.0;
+  auto inner = std::make_unique<Isam2Backend>(BackendOptions{}, io);
+  if (isam) *isam = inner.get();
+  return std::make_unique<RisamBackend>(std::move(inner), options);
+}
+
+OnlineCounts runOnline(const PoseGraphProblem& p, RisamBackend* given = nullptr,
+                       size_t* treeBytesOnline = nullptr, Isam2Backend* isam = nullptr) {
+  const std::unique_ptr<Backend> backend = given ? nullptr : makeBackend("risam");
+  auto& b = given ? *given : dynamic_cast<RisamBackend&>(*backend);
   OnlineCounts c;
   const auto steps = incrementalSchedule(p);
   for (size_t i = 0; i < steps.size(); ++i) {
@@ -50,6 +64,7 @@ OnlineCounts runOnline(const PoseGraphProblem& p) {
     if (c.firstNonFinite < 0 && !b.estimate().allFinite()) c.firstNonFinite = static_cast<int>(i);
   }
   c.rejectedOnline = b.rejected().size();
+  if (treeBytesOnline && isam) *treeBytesOnline = isam->cliqueStorageBytes();
   b.optimize();
   c.rejectedFinal = b.rejected().size();
   c.chi2Final = b.chi2();
@@ -117,6 +132,99 @@ TEST(RisamOnline, StaysFiniteWhenAWrongClosureTurnsALongChain) {
 // rounding there; the outlier-free optimum's is 0.06).
 TEST(RisamOnline, RegraduatesEveryClosureWithoutRunningAwayWhenTheGateTightens) {
   expectNoRunaway("parking-garage.g2o", 100, 700);
+}
+
+// 60 random wrong closures (loopd-outliers --mode random --seed 1) on sphere2500's first 300
+// poses. Each one that is still far out after
+// its graduation leaves the inner iSAM2 (RisamOptions::parkFactor): the same decisions as
+// with every factor kept in, and a Bayes tree without the wrong closures' fill.
+TEST(RisamParking, TakesFarOutClosuresOutOfTheTreeWithTheSameDecisions) {
+  tools::OutlierOptions o;
+  o.count = 60;
+  o.mode = tools::OutlierMode::Random;
+  o.seed = 1;
+  const tools::OutlierResult data = tools::addOutliers(test::loadPrefix("sphere2500.g2o:300"), o);
+  const PoseGraphProblem p = buildProblem(data.graph);
+  RisamOptions keep;
+  keep.parkFactor = 0.0;
+  Isam2Backend *isamKeep = nullptr, *isamPark = nullptr;
+  auto kept = makeRisam(keep, &isamKeep);
+  auto parked = makeRisam(RisamOptions{}, &isamPark);
+  size_t bytesKept = 0, bytesParked = 0;
+  const OnlineCounts ck = runOnline(p, kept.get(), &bytesKept, isamKeep);
+  const OnlineCounts cp = runOnline(p, parked.get(), &bytesParked, isamPark);
+  size_t closures = 0;
+  for (const auto& f : p.graph.factors()) closures += f->role() == FactorRole::LoopClosure;
+  std::printf(
+      "[risam] sphere2500:300 + random outliers: %zu closures, rejected %zu / %zu, "
+      "parked %zu, tree %zu / %zu bytes (kept / parked)\n",
+      closures, ck.rejectedFinal, cp.rejectedFinal, parked->parkedFactors(), bytesKept,
+      bytesParked);
+  EXPECT_EQ(kept->parkedFactors(), 0u);
+  EXPECT_GE(parked->parkedFactors(), 5u);
+  auto sorted = [](std::vector<FactorId> v) {
+    std::sort(v.begin(), v.end());
+    return v;
+  };
+  EXPECT_EQ(sorted(kept->rejected()), sorted(parked->rejected()));
+  EXPECT_NEAR(cp.chi2Final, ck.chi2Final, 1e-6 * ck.chi2Final);
+  EXPECT_LT(bytesParked, bytesKept * 3 / 4);
+}
+
+// One lap of the square walk with a stiff odometry factor 5 m off at 20 → 21: the true closure
+// 40 → 0 is far out and leaves the inner iSAM2 one update later. The front-end then replaces
+// the wrong odometry factor (a removal and a new factor in one update): the closure fits the
+// corrected map, comes back at the next update and is accepted.
+TEST(RisamParking, BringsAParkedClosureBackOnceItFits) {
+  Isam2Backend* isam = nullptr;
+  auto b = makeRisam(RisamOptions{}, &isam);
+  const Eigen::Matrix3d odoInfo = Eigen::Vector3d(1e4, 1e4, 1e6).asDiagonal();
+  const Eigen::Matrix3d closureInfo = Eigen::Vector3d(100, 100, 1e4).asDiagonal();
+  FactorId nextId = 1;
+  auto odometry = [&](int i, const SE2& z) {
+    auto f = std::make_shared<BetweenFactorSE2>(poseKey(i - 1), poseKey(i), z, odoInfo,
+                                                FactorRole::Odometry);
+    f->setId(nextId++);
+    return f;
+  };
+  FactorId wrongOdometry = 0;
+  for (int i = 0; i <= square::kLap + 1; ++i) {
+    BackendUpdate u;
+    if (i == 0) {
+      u.initial.insert(poseKey(0), SE2());
+    } else {
+      SE2 z = square::walk(i - 1).inverse() * square::walk(i);
+      if (i == 21) z = z * SE2(5.0, 0.0, 0.0);
+      u.factors.push_back(odometry(i, z));
+      if (i == 21) wrongOdometry = u.factors.back()->id();
+      u.initial.insert(poseKey(i), b->estimate().se2(b->estimate().slot(poseKey(i - 1))) * z);
+    }
+    if (i == square::kLap) {
+      auto c = std::make_shared<BetweenFactorSE2>(poseKey(square::kLap), poseKey(0), SE2(),
+                                                  closureInfo, FactorRole::LoopClosure);
+      c->setId(1000);
+      u.factors.push_back(c);
+    }
+    b->update(u);
+  }
+  ASSERT_EQ(b->rejected(), std::vector<FactorId>{1000});
+  EXPECT_EQ(b->parkedFactors(), 1u);
+  EXPECT_EQ(isam->graph().size(), static_cast<size_t>(square::kLap + 1));  // odometry only
+
+  BackendUpdate fix;
+  fix.removals.push_back(wrongOdometry);
+  fix.factors.push_back(odometry(21, square::walk(20).inverse() * square::walk(21)));
+  b->update(fix);
+  EXPECT_EQ(b->parkedFactors(), 1u);  // checked against the estimate before an update
+  BackendUpdate next;
+  next.factors.push_back(odometry(square::kLap + 2, square::walk(0).inverse() * square::walk(1)));
+  b->update(next);
+  EXPECT_EQ(b->parkedFactors(), 0u);
+  EXPECT_TRUE(b->rejected().empty());
+  EXPECT_EQ(isam->graph().size(), static_cast<size_t>(square::kLap + 3));
+  const Values& x = b->estimate();
+  const SE2 end = x.se2(x.slot(poseKey(square::kLap))), start = x.se2(x.slot(poseKey(0)));
+  EXPECT_LT(std::hypot(end.x - start.x, end.y - start.y), 0.01);
 }
 
 }  // namespace
