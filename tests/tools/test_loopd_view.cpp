@@ -386,7 +386,8 @@ std::string field(const std::string& json, const std::string& key) {
 
 std::string base64Decode(const std::string& in) {
   std::string out;
-  int val = 0, bits = -8;
+  unsigned val = 0;  // only the low 14 bits matter; unsigned so the shift cannot overflow
+  int bits = -8;
   for (unsigned char c : in) {
     int d;
     if (c >= 'A' && c <= 'Z') d = c - 'A';
@@ -395,7 +396,7 @@ std::string base64Decode(const std::string& in) {
     else if (c == '+') d = 62;
     else if (c == '/') d = 63;
     else continue;
-    val = (val << 6) + d;
+    val = ((val << 6) | static_cast<unsigned>(d)) & 0xFFFFFFu;
     bits += 6;
     if (bits >= 0) {
       out.push_back(static_cast<char>((val >> bits) & 0xFF));
