@@ -121,6 +121,12 @@ bool RisamBackend::farOut(const Graduated& g, const Values& x) const {
   return g.original->chi2(x) > options_.parkFactor * tailChi2(g.original->dim());
 }
 
+void RisamBackend::markFarOut(const std::vector<FactorId>& ids) {
+  const Values& x = inner_->estimate();
+  for (FactorId id : ids)
+    if (farOut(graduated_[id], x)) toPark_.push_back(id);
+}
+
 bool RisamBackend::shouldPark(FactorId id) {
   auto it = graduated_.find(id);
   if (it == graduated_.end() || !farOut(it->second, inner_->estimate())) return false;
@@ -456,7 +462,6 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     promote();
     return result;
   }
-  const Values& x = inner_->estimate();  // `x` stays current: a reference to the inner estimate
   // Not absorbed: the neighbours join the active set at μ_init (one more convex step), then
   // the schedule, cut short once everything is absorbed.
   neighbours.insert(neighbours.end(), parkedNeighbours.begin(), parkedNeighbours.end());
@@ -474,8 +479,7 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
       return result;
     }
   }
-  for (FactorId id : activeIds)
-    if (farOut(graduated_[id], x)) toPark_.push_back(id);
+  markFarOut(activeIds);
   return result;
 }
 
@@ -654,9 +658,7 @@ void RisamBackend::graduateAgain(const std::vector<FactorId>& ids, bool converge
     inner_->update(regraduate(ids, mu));
     if (converge) inner_->optimize();
   }
-  const Values& x = inner_->estimate();
-  for (FactorId id : ids)
-    if (farOut(graduated_[id], x)) toPark_.push_back(id);
+  markFarOut(ids);
 }
 
 void RisamBackend::regraduateIfTightened() {

@@ -154,8 +154,10 @@ class RisamBackend : public DecoratorBackend {
     bool decided = false;  // optimize() put it in at a fixed weight
     bool parked = false;   // out of the inner backend (parkFactor); internalId unused
   };
-  /// Still in the inner backend, undecided, and χ² above parkFactor × its rejection threshold.
+  /// Still in the inner backend, undecided, and χ² above parkFactor × its tail test.
   bool farOut(const Graduated& g, const Values& x) const;
+  /// The far-out ones of ids, after their graduation: toPark_ (parked at the next update).
+  void markFarOut(const std::vector<FactorId>& ids);
   /// farOut, and the predicted χ² rᵀ(I + JΣJᵀ)⁻¹r above parkPredictedFactor × the tail test.
   bool shouldPark(FactorId id);
   void unpark(FactorId id);  // parked flag off and out of parked_ (the caller re-adds it)

@@ -135,9 +135,9 @@ TEST(RisamOnline, RegraduatesEveryClosureWithoutRunningAwayWhenTheGateTightens) 
 }
 
 // 60 random wrong closures (loopd-outliers --mode random --seed 1) on sphere2500's first 300
-// poses. Each one that is still far out after
-// its graduation leaves the inner iSAM2 (RisamOptions::parkFactor): the same decisions as
-// with every factor kept in, and a Bayes tree without the wrong closures' fill.
+// poses. Each one still far out after its graduation leaves the inner iSAM2
+// (RisamOptions::parkFactor): the same decisions as with every factor kept in, and a Bayes
+// tree without the wrong closures' fill.
 TEST(RisamParking, TakesFarOutClosuresOutOfTheTreeWithTheSameDecisions) {
   tools::OutlierOptions o;
   o.count = 60;
