@@ -89,8 +89,8 @@ bool GncBackend::Run::shrinkGate() {
 // median cap), at most `cap` and at most c̄²/widenFactor (still a tightened gate): rejected
 // closures consistent with the solution come back.
 void GncBackend::Run::readmitAtTail(double cap) {
-  const TailGate t = tailGate(acceptedNormalized(), gnc_.tailExponent, 1e300);
-  const double g = std::min(t.gate, cap);
+  // The uncapped tail itself: a cap of medianFactor × a median of 0 would be a gate of 0.
+  const double g = std::min(tailGate(acceptedNormalized(), gnc_.tailExponent, 0.0).tail, cap);
   bool wider = false;
   std::vector<double> next = gate_;
   for (int i = 0; i < n_; ++i)

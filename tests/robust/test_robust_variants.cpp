@@ -226,6 +226,12 @@ TEST(TailGate, MedianAndTailOfNormalizedChi2) {
   EXPECT_NEAR(tailGate(q, 3.0, 10.0).gate, 10.0 * t.scale, 1e-9);  // capped by the median
   EXPECT_NEAR(tailGate(q, 3.0, 10.0).tail, q99 * std::pow(q99 / q90, 3.0), 1e-9);  // uncapped
   EXPECT_EQ(tailGate({1, 2, 3}, 3.0, 100.0).gate, 0.0);            // too few values
+  // More than half exact fits (noise-free closures): the median cap is 0, the tail is not,
+  // which is why the re-check at the tail reads `tail`.
+  std::vector<double> exact(600, 0.0);
+  for (int i = 0; i < 400; ++i) exact.push_back(0.01 * (i + 1));
+  EXPECT_EQ(tailGate(exact, 3.0, 100.0).gate, 0.0);
+  EXPECT_GT(tailGate(exact, 3.0, 100.0).tail, 0.0);
 }
 
 // The issue protocol's outliers on a reference dataset (groups of 10).
