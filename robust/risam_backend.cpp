@@ -225,7 +225,71 @@ FactorPtr RisamBackend::wrap(const FactorPtr& f, double mu, FactorId internal) c
   }
 }
 
+namespace {
+double largestMagnitude(const double* x, size_t n) {
+  double m = 0.0;
+  for (size_t i = 0; i < n; ++i) m = std::max(m, std::abs(x[i]));
+  return m;
+}
+}  // namespace
+
 UpdateResult RisamBackend::update(const BackendUpdate& u) {
+  bool guarded = options_.runawayFactor > 0.0 && innerIsam2_ != nullptr;
+  if (guarded) {
+    guarded = false;
+    for (const FactorPtr& f : u.factors)
+      if (f && isUncertain(f->role())) guarded = true;
+  }
+  const Values& x = inner_->estimate();
+  if (!guarded || x.empty()) return updateArrival(u);
+  // Only arrivals with uncertain factors can run away. The estimate before is kept as raw
+  // storage in a reused buffer (slots only grow): a Values copy, with its key index, cost
+  // city10000 (≈ 10⁴ closure arrivals) as much as the whole online solve.
+  const int beforeSize = x.size();
+  const size_t n = static_cast<size_t>(beforeSize) * kValueStride;
+  runawayStart_.resize(n);
+  double extent = 0.0;
+  const double* from = x.data(0);
+  for (size_t i = 0; i < n; ++i) {
+    runawayStart_[i] = from[i];
+    extent = std::max(extent, std::abs(from[i]));
+  }
+  UpdateResult result = updateArrival(u);
+  // Absorbed arrivals are checked too: "absorbed" looks at the closures only.
+  if (!(extent > 0.0)) return result;
+  const Values& after = inner_->estimate();
+  const double grown =
+      largestMagnitude(after.data(0), static_cast<size_t>(after.size()) * kValueStride);
+  if (!(grown <= options_.runawayFactor * extent)) undoRunaway(u, beforeSize);
+  return result;
+}
+
+void RisamBackend::undoRunaway(const BackendUpdate& u, int beforeSize) {
+  BackendUpdate out;
+  for (const FactorPtr& f : u.factors) {
+    if (!f || !isUncertain(f->role())) continue;
+    auto it = graduated_.find(f->id());
+    if (it == graduated_.end() || it->second.parked) continue;
+    out.removals.push_back(it->second.internalId);
+    it->second.parked = true;
+    it->second.decided = false;
+    parked_.push_back(f->id());
+  }
+  if (!out.removals.empty()) inner_->update(out);
+  // The variables from before the arrival at their values then; the arrival's new ones at
+  // their initial values.
+  Values start = inner_->estimate();
+  std::copy(runawayStart_.begin(), runawayStart_.end(), start.data(0));
+  for (int s = beforeSize; s < start.size(); ++s) {
+    const int i = u.initial.slot(start.key(s));
+    if (i >= 0) std::copy(u.initial.data(i), u.initial.data(i) + kValueStride, start.data(s));
+  }
+  innerIsam2_->resetEstimate(start);
+  inner_->optimize();
+  ++runawaysUndone_;
+}
+
+UpdateResult RisamBackend::updateArrival(const BackendUpdate& u) {
   restoreGraduated();  // after optimize(): every closure back to its SIG kernel at μ = 1
   size_t incoming = 0;
   for (const FactorPtr& f : u.factors)

@@ -123,6 +123,15 @@ struct RisamOptions {
   /// does, and the retry at optimize() tests them too. parkFactor 0: off.
   double parkFactor = 100.0;
   double parkPredictedFactor = 10.0;
+  /// An arrival after which the map's extent (largest coordinate) is more than runawayFactor
+  /// × what it was before is undone: the inner iSAM2 goes back to the estimate before it (new
+  /// variables at their initial values) and the arrival's uncertain factors are parked, to
+  /// come back once they fit. New poses move the extent by a step; a hundredfold is a runaway
+  /// (parking-garage + 1000 local outliers: 254 m → 2·10⁵ m in one arrival's graduation, the
+  /// schedule's steps ×2–×20 each, then 10¹⁸⁷ m). Not 10: grouped wrong closures bend
+  /// manhattan ×16–×21 for one arrival, and it recovers by itself (undone, two stayed in).
+  /// 0: off.
+  double runawayFactor = 100.0;
 };
 
 class RisamBackend : public DecoratorBackend {
@@ -143,6 +152,8 @@ class RisamBackend : public DecoratorBackend {
   int retriedFactors() const { return retried_; }
   /// Factors currently out of the inner backend (RisamOptions::parkFactor).
   size_t parkedFactors() const { return parked_.size(); }
+  /// Arrivals undone as runaways (RisamOptions::runawayFactor).
+  int runawaysUndone() const { return runawaysUndone_; }
   static constexpr FactorId kInternalIdBit = FactorId{1} << 63;
 
  private:
@@ -154,6 +165,12 @@ class RisamBackend : public DecoratorBackend {
     bool decided = false;  // optimize() put it in at a fixed weight
     bool parked = false;   // out of the inner backend (parkFactor); internalId unused
   };
+  /// update() without the runaway check.
+  UpdateResult updateArrival(const BackendUpdate& update);
+  /// Undoes an arrival that ran the map away (RisamOptions::runawayFactor): the inner iSAM2
+  /// back at runawayStart_ (its first beforeSize variables; new ones at u.initial), u's
+  /// uncertain factors parked.
+  void undoRunaway(const BackendUpdate& u, int beforeSize);
   /// Still in the inner backend, undecided, and χ² above parkFactor × its tail test.
   bool farOut(const Graduated& g, const Values& x) const;
   /// The far-out ones of ids, after their graduation: toPark_ (parked at the next update).
@@ -207,6 +224,8 @@ class RisamBackend : public DecoratorBackend {
   FactorId nextInternal_ = 0;
   int lastInnerUpdates_ = 0;
   int absorbedUpdates_ = 0;
+  int runawaysUndone_ = 0;
+  std::vector<double> runawayStart_;  // the estimate's storage before the current arrival
   int retried_ = 0;
   size_t retriedAtCount_ = 0;
   double gate_ = 0.0;                   // noise-aware gate (normalized), 0 = defaults

@@ -870,6 +870,23 @@ bool Isam2Backend::solveClique(const Clique& C, std::vector<Key>* moved) {
 // ---------------------------------------------------------------------------------------------
 // Converging: full relinearization until the cost stops decreasing
 
+void Isam2Backend::relinearizeAllAtEstimate() {
+  ++epoch_;
+  stats_ = {};
+  affected_.clear();
+  relinearize(true);
+  if (newestVar_ >= 0) constrainedStamp_[newestVar_] = epoch_;
+  recompute();
+}
+
+void Isam2Backend::resetEstimate(const Values& x) {
+  for (int v = 0; v < estimate_.size(); ++v) {
+    const int s = x.slot(estimate_.key(v));
+    if (s >= 0) std::memcpy(estimate_.data(v), x.data(s), sizeof(double) * kValueStride);
+  }
+  relinearizeAllAtEstimate();
+}
+
 void Isam2Backend::optimize() {
   if (factors_.empty()) return;
   auto cost = [&]() {
@@ -878,12 +895,7 @@ void Isam2Backend::optimize() {
     return c;
   };
   auto fullStep = [&]() {
-    ++epoch_;
-    stats_ = {};
-    affected_.clear();
-    relinearize(true);
-    if (newestVar_ >= 0) constrainedStamp_[newestVar_] = epoch_;
-    recompute();
+    relinearizeAllAtEstimate();
     backSubstitute(nullptr);
   };
   auto revert = [&]() {  // back to θ (the estimate before the last step)

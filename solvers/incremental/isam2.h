@@ -58,6 +58,9 @@ class Isam2Backend : public Backend {
   /// The next update checks for relinearization whatever relinearizeSkip says (a caller
   /// about to change factors' weights in steps: riSAM's graduation).
   void relinearizeNextUpdate() { relinearizeNext_ = true; }
+  /// Moves the variables x holds to its values and relinearizes the whole tree there, without
+  /// taking a step (a caller undoing a runaway: riSAM). Variables x lacks keep theirs.
+  void resetEstimate(const Values& x);
   const Values& estimate() const override { return estimate_; }
   const FactorGraph& graph() const override { return graph_; }
   Eigen::MatrixXd marginalCovariance(const std::vector<Key>& keys) override;
@@ -115,6 +118,8 @@ class Isam2Backend : public Backend {
   // --- elimination and solve
   /// Re-eliminates the top formed by affected_ (constrained_ ordered last).
   void recompute();
+  /// Every variable relinearized at the current estimate (Δ = 0) and the tree recomputed.
+  void relinearizeAllAtEstimate();
   bool factorizeClique(Clique& C);
   void linearizeInto(int factor, Clique& C);
   void accumulateChild(const Clique& child, Clique& C);

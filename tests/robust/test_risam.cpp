@@ -162,6 +162,7 @@ TEST(RisamParking, TakesFarOutClosuresOutOfTheTreeWithTheSameDecisions) {
       bytesParked);
   EXPECT_EQ(kept->parkedFactors(), 0u);
   EXPECT_GE(parked->parkedFactors(), 5u);
+  EXPECT_EQ(parked->runawaysUndone(), 0);  // sixty wrong closures bend, none runs away
   auto sorted = [](std::vector<FactorId> v) {
     std::sort(v.begin(), v.end());
     return v;
@@ -225,6 +226,62 @@ TEST(RisamParking, BringsAParkedClosureBackOnceItFits) {
   const Values& x = b->estimate();
   const SE2 end = x.se2(x.slot(poseKey(square::kLap))), start = x.se2(x.slot(poseKey(0)));
   EXPECT_LT(std::hypot(end.x - start.x, end.y - start.y), 0.01);
+}
+
+// The undo of a runaway arrival, driven with runawayFactor 0.5 so that any arrival the convex
+// step does not absorb counts as one: a closure 3 m off at the end of the lap. The map stays as
+// it was before the arrival (odometry only, here exact) and the closure is parked (rejected,
+// out of the inner iSAM2); with the undo off it bends the map.
+TEST(RisamRunaway, UndoesTheArrivalAndParksItsClosures) {
+  const Eigen::Matrix3d odoInfo = Eigen::Vector3d(1e4, 1e4, 1e6).asDiagonal();
+  const Eigen::Matrix3d closureInfo = Eigen::Vector3d(100, 100, 1e4).asDiagonal();
+  auto run = [&](double runawayFactor, Isam2Backend** isam) {
+    RisamOptions o;
+    o.runawayFactor = runawayFactor;
+    auto b = makeRisam(o, isam);
+    FactorId nextId = 1;
+    for (int i = 0; i <= square::kLap; ++i) {
+      BackendUpdate u;
+      if (i == 0) {
+        u.initial.insert(poseKey(0), SE2());
+      } else {
+        auto f = std::make_shared<BetweenFactorSE2>(poseKey(i - 1), poseKey(i),
+                                                    square::walk(i - 1).inverse() * square::walk(i),
+                                                    odoInfo, FactorRole::Odometry);
+        f->setId(nextId++);
+        u.factors.push_back(f);
+        // 0.3 m off, as a front-end's initial guess would be.
+        u.initial.insert(poseKey(i), square::walk(i) * SE2(0.3, 0.0, 0.0));
+      }
+      if (i == square::kLap) {
+        auto c = std::make_shared<BetweenFactorSE2>(poseKey(square::kLap), poseKey(0),
+                                                    SE2(3.0, 0.0, 0.0), closureInfo,
+                                                    FactorRole::LoopClosure);
+        c->setId(1000);
+        u.factors.push_back(c);
+      }
+      b->update(u);
+    }
+    return b;
+  };
+  auto worstPoseError = [](const Values& x) {
+    double worst = 0.0;
+    for (int i = 0; i <= square::kLap; ++i) {
+      const SE2 xi = x.se2(x.slot(poseKey(i))), ti = square::walk(i);
+      worst = std::max(worst, std::hypot(xi.x - ti.x, xi.y - ti.y));
+    }
+    return worst;
+  };
+  Isam2Backend *isamOff = nullptr, *isamOn = nullptr;
+  auto off = run(0.0, &isamOff);
+  auto on = run(0.5, &isamOn);
+  EXPECT_EQ(off->runawaysUndone(), 0);
+  EXPECT_GT(worstPoseError(off->estimate()), 1e-4) << "the closure no longer bends the map";
+  EXPECT_EQ(on->runawaysUndone(), 1);
+  EXPECT_EQ(on->parkedFactors(), 1u);
+  EXPECT_EQ(on->rejected(), std::vector<FactorId>{1000});
+  EXPECT_EQ(isamOn->graph().size(), static_cast<size_t>(square::kLap));  // odometry only
+  EXPECT_LT(worstPoseError(on->estimate()), 1e-6);
 }
 
 }  // namespace

@@ -124,6 +124,37 @@ TEST(Isam2, EqualsBatchOptimumOnIntelWithoutFinalOptimizeIsClose) {
   EXPECT_LT(online, 1.05 * isam.chi2());
 }
 
+// resetEstimate moves the variables it is given (others keep theirs) without a step, and the
+// tree is relinearized there: the next optimize() converges from that point to the optimum.
+TEST(Isam2, ResetEstimateMovesTheLinearizationPointAndOptimizeRecovers) {
+  const PoseGraphProblem p = prefix(load("intel.g2o"), 300);
+  Isam2Backend isam;
+  feed(isam, p);
+  isam.optimize();
+  const Values optimum = isam.estimate();
+  Values moved;
+  for (int s = 0; s < optimum.size(); s += 2) {
+    const SE2 x = optimum.se2(s);
+    moved.insert(optimum.key(s), SE2(x.x + 0.5, x.y - 0.3, x.theta + 0.05));
+  }
+  isam.resetEstimate(moved);
+  for (int s = 0; s < optimum.size(); ++s) {
+    const int m = moved.slot(optimum.key(s));
+    const Values& expected = m >= 0 ? moved : optimum;
+    EXPECT_EQ(tangentDistance(expected, m >= 0 ? m : s, isam.estimate(),
+                              isam.estimate().slot(optimum.key(s))),
+              0.0);
+    EXPECT_EQ(
+        tangentDistance(isam.estimate(), isam.estimate().slot(optimum.key(s)),
+                        isam.linearizationPoint(), isam.linearizationPoint().slot(optimum.key(s))),
+        0.0);
+  }
+  EXPECT_GT(isam.chi2(), 10.0 * p.graph.chi2(optimum));
+  isam.optimize();
+  EXPECT_TRUE(isam.summary().converged) << isam.summary().stopReason;
+  EXPECT_NEAR(isam.chi2(), p.graph.chi2(optimum), 1e-6 * p.graph.chi2(optimum));
+}
+
 TEST(Isam2, RemovingAFactorEqualsNeverAddingIt) {
   const PoseGraphProblem p = prefix(load("manhattan.g2o"), 300);
   // Two loop closures: one removed mid-stream, one removed after the end.
