@@ -111,6 +111,13 @@ BackendUpdate RisamBackend::regraduate(const std::vector<FactorId>& ids, double 
   return step;
 }
 
+void RisamBackend::park(FactorId id) {
+  Graduated& g = graduated_[id];
+  g.parked = true;
+  g.decided = false;
+  parked_.push_back(id);
+}
+
 void RisamBackend::unpark(FactorId id) {
   graduated_[id].parked = false;
   parked_.erase(std::find(parked_.begin(), parked_.end(), id));
@@ -225,14 +232,6 @@ FactorPtr RisamBackend::wrap(const FactorPtr& f, double mu, FactorId internal) c
   }
 }
 
-namespace {
-double largestMagnitude(const double* x, size_t n) {
-  double m = 0.0;
-  for (size_t i = 0; i < n; ++i) m = std::max(m, std::abs(x[i]));
-  return m;
-}
-}  // namespace
-
 UpdateResult RisamBackend::update(const BackendUpdate& u) {
   bool guarded = options_.runawayFactor > 0.0 && innerIsam2_ != nullptr;
   if (guarded) {
@@ -257,10 +256,8 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   UpdateResult result = updateArrival(u);
   // Absorbed arrivals are checked too: "absorbed" looks at the closures only.
   if (!(extent > 0.0)) return result;
-  const Values& after = inner_->estimate();
-  const double grown =
-      largestMagnitude(after.data(0), static_cast<size_t>(after.size()) * kValueStride);
-  if (!(grown <= options_.runawayFactor * extent)) undoRunaway(u, beforeSize);
+  if (!(inner_->estimate().largestMagnitude() <= options_.runawayFactor * extent))
+    undoRunaway(u, beforeSize);
   return result;
 }
 
@@ -271,9 +268,7 @@ void RisamBackend::undoRunaway(const BackendUpdate& u, int beforeSize) {
     auto it = graduated_.find(f->id());
     if (it == graduated_.end() || it->second.parked) continue;
     out.removals.push_back(it->second.internalId);
-    it->second.parked = true;
-    it->second.decided = false;
-    parked_.push_back(f->id());
+    park(f->id());
   }
   if (!out.removals.empty()) inner_->update(out);
   // The variables from before the arrival at their values then; the arrival's new ones at
@@ -449,10 +444,7 @@ UpdateResult RisamBackend::updateArrival(const BackendUpdate& u) {
     graduated_[id] = g;
     parked_.erase(std::find(parked_.begin(), parked_.end(), id));
   }
-  for (FactorId id : parking) {
-    graduated_[id].parked = true;
-    parked_.push_back(id);
-  }
+  for (FactorId id : parking) park(id);
   toPark_.clear();
   for (size_t a = 0; a < active.size(); ++a) {
     const bool isNew = graduated_.find(activeIds[a]) == graduated_.end();

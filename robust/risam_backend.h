@@ -177,6 +177,7 @@ class RisamBackend : public DecoratorBackend {
   void markFarOut(const std::vector<FactorId>& ids);
   /// farOut, and the predicted χ² rᵀ(I + JΣJᵀ)⁻¹r above parkPredictedFactor × the tail test.
   bool shouldPark(FactorId id);
+  void park(FactorId id);    // parked flag on, undecided, into parked_ (the caller removes it)
   void unpark(FactorId id);  // parked flag off and out of parked_ (the caller re-adds it)
   double nextMu(double mu) const;
   /// The inner update that re-adds each of ids at μ under a fresh internal id.
