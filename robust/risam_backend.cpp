@@ -233,17 +233,18 @@ FactorPtr RisamBackend::wrap(const FactorPtr& f, double mu, FactorId internal) c
 }
 
 UpdateResult RisamBackend::update(const BackendUpdate& u) {
-  bool guarded = options_.runawayFactor > 0.0 && innerIsam2_ != nullptr;
-  if (guarded) {
-    guarded = false;
-    for (const FactorPtr& f : u.factors)
-      if (f && isUncertain(f->role())) guarded = true;
-  }
+  int incoming = 0;
+  for (const FactorPtr& f : u.factors)
+    if (f && isUncertain(f->role())) ++incoming;
+  const bool checkRunaway = options_.runawayFactor > 0.0;
+  const bool checkCollateral = options_.collateralFactor > 0.0;
   const Values& x = inner_->estimate();
-  if (!guarded || x.empty()) return updateArrival(u);
-  // Only arrivals with uncertain factors can run away. The estimate before is kept as raw
-  // storage in a reused buffer (slots only grow): a Values copy, with its key index, cost
-  // city10000 (≈ 10⁴ closure arrivals) as much as the whole online solve.
+  // Only arrivals with uncertain factors can run away or push others out.
+  if (incoming == 0 || innerIsam2_ == nullptr || !(checkRunaway || checkCollateral) || x.empty())
+    return updateArrival(u);
+  // The estimate before is kept as raw storage in a reused buffer (slots only grow): a Values
+  // copy, with its key index, cost city10000 (≈ 10⁴ closure arrivals) as much as the whole
+  // online solve.
   const int beforeSize = x.size();
   const size_t n = static_cast<size_t>(beforeSize) * kValueStride;
   runawayStart_.resize(n);
@@ -253,15 +254,120 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
     runawayStart_[i] = from[i];
     extent = std::max(extent, std::abs(from[i]));
   }
+  const int absorbedBefore = absorbedUpdates_;
   UpdateResult result = updateArrival(u);
   // Absorbed arrivals are checked too: "absorbed" looks at the closures only.
-  if (!(extent > 0.0)) return result;
-  if (!(inner_->estimate().largestMagnitude() <= options_.runawayFactor * extent))
-    undoRunaway(u, beforeSize);
+  if (checkRunaway && extent > 0.0 &&
+      !(inner_->estimate().largestMagnitude() <= options_.runawayFactor * extent)) {
+    undoArrival(u, beforeSize, true);
+    ++runawaysUndone_;
+    return result;
+  }
+  const bool graduated = absorbedUpdates_ == absorbedBefore && lastInnerUpdates_ > 1;
+  // Single closures are checked only when fed again from a contested arrival: checking every
+  // one undid hundreds of arrivals on manhattan + 1000 local (each a full relinearization)
+  // for the same answer.
+  if (!checkCollateral || !graduated || (incoming < 2 && !refeeding_)) return result;
+  const double limit =
+      std::max(static_cast<double>(options_.collateralMin), options_.collateralFactor * incoming);
+  // Pushed-out closures are a cheap sign; the truncated cost (Σ trusted χ² + Σ min(χ², the
+  // rejection test)) decides, so a true closure that pushes out wrong ones accepted before it
+  // (a group bending the map) stays: undoing that arrival would cost more than it saves.
+  if (!(pushedOut(u, beforeSize) > limit) || !(undoCostChange(u, beforeSize) < 0.0)) return result;
+  std::vector<FactorId> ids;
+  for (const FactorPtr& f : u.factors)
+    if (f && isUncertain(f->role())) ids.push_back(f->id());
+  undoArrival(u, beforeSize, false);
+  ++contestedUndone_;
+  if (incoming > 1) refeedSingly(std::move(ids));
   return result;
 }
 
-void RisamBackend::undoRunaway(const BackendUpdate& u, int beforeSize) {
+namespace {
+
+// χ² of f with each variable read from `base` at its slot in x (the estimate's own storage,
+// or a raw copy of its first `size` slots); NaN if a variable is at or past `size`.
+double chi2FromStorage(const Factor& f, const Values& x, const double* base, int size) {
+  std::array<const double*, kMaxFactorKeys> at{};
+  for (int k = 0; k < f.size(); ++k) {
+    const int s = x.slot(f.key(k));
+    if (s < 0 || s >= size) return std::numeric_limits<double>::quiet_NaN();
+    at[k] = base + static_cast<size_t>(s) * kValueStride;
+  }
+  double r[kMaxResidualDim];
+  f.evaluate(at.data(), r, nullptr);
+  double sum = 0.0;
+  for (int i = 0; i < f.dim(); ++i) sum += r[i] * r[i];
+  return sum;
+}
+
+}  // namespace
+
+int RisamBackend::pushedOut(const BackendUpdate& u, int beforeSize) const {
+  std::unordered_set<FactorId> arriving;
+  for (const FactorPtr& f : u.factors)
+    if (f) arriving.insert(f->id());
+  // Graduated factors outside u touch only variables from before the arrival.
+  const Values& x = inner_->estimate();
+  int count = 0;
+  for (const auto& [id, g] : graduated_) {
+    if (g.parked || g.decided || arriving.count(id)) continue;
+    const Factor& f = *g.original;
+    const double threshold = rejectChi2(f.dim());
+    if (chi2FromStorage(f, x, x.data(0), x.size()) > threshold &&
+        chi2FromStorage(f, x, runawayStart_.data(), beforeSize) <= threshold)
+      ++count;
+  }
+  return count;
+}
+
+double RisamBackend::undoCostChange(const BackendUpdate& u, int beforeSize) const {
+  std::unordered_set<FactorId> arriving;
+  for (const FactorPtr& f : u.factors)
+    if (f) arriving.insert(f->id());
+  const Values& x = inner_->estimate();
+  double kept = 0.0, undone = 0.0;
+  for (const auto& f : originals_.factors()) {
+    const bool uncertain = graduated_.count(f->id()) > 0;
+    const double threshold = uncertain ? rejectChi2(f->dim()) : 0.0;
+    auto cost = [&](double chi2) { return uncertain ? std::min(chi2, threshold) : chi2; };
+    kept += cost(chi2FromStorage(*f, x, x.data(0), x.size()));
+    const double before = chi2FromStorage(*f, x, runawayStart_.data(), beforeSize);
+    if (arriving.count(f->id()) && uncertain)
+      undone += threshold;  // undone: the arrival's closures rejected
+    else if (std::isfinite(before))
+      undone += cost(before);
+    // else: a trusted factor of the arrival's new variables, at their initial values (0)
+  }
+  return undone - kept;
+}
+
+void RisamBackend::refeedSingly(std::vector<FactorId> ids) {
+  const Values& x = inner_->estimate();
+  std::vector<std::pair<double, FactorId>> order;
+  for (FactorId id : ids) {
+    auto it = graduated_.find(id);
+    if (it != graduated_.end() && it->second.parked)
+      order.emplace_back(it->second.original->chi2(x), id);
+  }
+  std::sort(order.begin(), order.end(), [](const auto& a, const auto& b) {
+    return a.first > b.first || (a.first == b.first && a.second < b.second);
+  });
+  struct Refeeding {
+    bool& flag;
+    explicit Refeeding(bool& f) : flag(f) { flag = true; }
+    ~Refeeding() { flag = false; }
+  } refeeding(refeeding_);
+  for (const auto& [chi2, id] : order) {
+    if (!graduated_[id].parked) continue;  // came back with an earlier one (it fit)
+    unpark(id);
+    BackendUpdate one;
+    one.factors.push_back(graduated_[id].original);
+    update(one);  // one uncertain factor: undone and parked again, or in
+  }
+}
+
+void RisamBackend::undoArrival(const BackendUpdate& u, int beforeSize, bool settle) {
   BackendUpdate out;
   for (const FactorPtr& f : u.factors) {
     if (!f || !isUncertain(f->role())) continue;
@@ -269,6 +375,7 @@ void RisamBackend::undoRunaway(const BackendUpdate& u, int beforeSize) {
     if (it == graduated_.end() || it->second.parked) continue;
     out.removals.push_back(it->second.internalId);
     park(f->id());
+    toPark_.erase(std::remove(toPark_.begin(), toPark_.end(), f->id()), toPark_.end());
   }
   if (!out.removals.empty()) inner_->update(out);
   // The variables from before the arrival at their values then; the arrival's new ones at
@@ -280,8 +387,10 @@ void RisamBackend::undoRunaway(const BackendUpdate& u, int beforeSize) {
     if (i >= 0) std::copy(u.initial.data(i), u.initial.data(i) + kValueStride, start.data(s));
   }
   innerIsam2_->resetEstimate(start);
-  inner_->optimize();
-  ++runawaysUndone_;
+  // A runaway's estimate before may itself be far from converged; a contested arrival's
+  // was not (the relinearization at it is enough, and an optimize() per undo cost
+  // manhattan + 1000 local 4× the solve time).
+  if (settle) inner_->optimize();
 }
 
 UpdateResult RisamBackend::updateArrival(const BackendUpdate& u) {
@@ -434,7 +543,7 @@ UpdateResult RisamBackend::updateArrival(const BackendUpdate& u) {
 
   // Commit the bookkeeping.
   nextInternal_ = nextInternal;
-  commitOriginals(u, removing);
+  if (!refeeding_) commitOriginals(u, removing);
   for (FactorId id : u.removals) graduated_.erase(id);
   parked_.erase(std::remove_if(parked_.begin(), parked_.end(),
                                [&](FactorId id) { return removing.count(id) > 0; }),

@@ -5,6 +5,7 @@
 // does not run away. All are counts or costs, so they do not depend on the machine's load.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -147,6 +148,7 @@ TEST(RisamParking, TakesFarOutClosuresOutOfTheTreeWithTheSameDecisions) {
   const PoseGraphProblem p = buildProblem(data.graph);
   RisamOptions keep;
   keep.parkFactor = 0.0;
+  keep.collateralFactor = 0.0;  // a contested arrival's closures are parked too
   Isam2Backend *isamKeep = nullptr, *isamPark = nullptr;
   auto kept = makeRisam(keep, &isamKeep);
   auto parked = makeRisam(RisamOptions{}, &isamPark);
@@ -228,6 +230,23 @@ TEST(RisamParking, BringsAParkedClosureBackOnceItFits) {
   EXPECT_LT(std::hypot(end.x - start.x, end.y - start.y), 0.01);
 }
 
+// Update i of a walk around the square: pose i's initial value, `offset` off the truth, and
+// (after the first) its odometry factor, id i.
+BackendUpdate squareWalkStep(int i, const Eigen::Matrix3d& odoInfo, const SE2& offset) {
+  BackendUpdate u;
+  if (i == 0) {
+    u.initial.insert(poseKey(0), SE2());
+    return u;
+  }
+  auto f = std::make_shared<BetweenFactorSE2>(poseKey(i - 1), poseKey(i),
+                                              square::walk(i - 1).inverse() * square::walk(i),
+                                              odoInfo, FactorRole::Odometry);
+  f->setId(i);
+  u.factors.push_back(f);
+  u.initial.insert(poseKey(i), square::walk(i) * offset);
+  return u;
+}
+
 // The undo of a runaway arrival, driven with runawayFactor 0.5 so that any arrival the convex
 // step does not absorb counts as one: a closure 3 m off at the end of the lap. The map stays as
 // it was before the arrival (odometry only, here exact) and the closure is parked (rejected,
@@ -239,20 +258,9 @@ TEST(RisamRunaway, UndoesTheArrivalAndParksItsClosures) {
     RisamOptions o;
     o.runawayFactor = runawayFactor;
     auto b = makeRisam(o, isam);
-    FactorId nextId = 1;
     for (int i = 0; i <= square::kLap; ++i) {
-      BackendUpdate u;
-      if (i == 0) {
-        u.initial.insert(poseKey(0), SE2());
-      } else {
-        auto f = std::make_shared<BetweenFactorSE2>(poseKey(i - 1), poseKey(i),
-                                                    square::walk(i - 1).inverse() * square::walk(i),
-                                                    odoInfo, FactorRole::Odometry);
-        f->setId(nextId++);
-        u.factors.push_back(f);
-        // 0.3 m off, as a front-end's initial guess would be.
-        u.initial.insert(poseKey(i), square::walk(i) * SE2(0.3, 0.0, 0.0));
-      }
+      // 0.3 m off, as a front-end's initial guess would be.
+      BackendUpdate u = squareWalkStep(i, odoInfo, SE2(0.3, 0.0, 0.0));
       if (i == square::kLap) {
         auto c = std::make_shared<BetweenFactorSE2>(poseKey(square::kLap), poseKey(0),
                                                     SE2(3.0, 0.0, 0.0), closureInfo,
@@ -282,6 +290,59 @@ TEST(RisamRunaway, UndoesTheArrivalAndParksItsClosures) {
   EXPECT_EQ(on->rejected(), std::vector<FactorId>{1000});
   EXPECT_EQ(isamOn->graph().size(), static_cast<size_t>(square::kLap));  // odometry only
   EXPECT_LT(worstPoseError(on->estimate()), 1e-6);
+}
+
+// The undo of a contested arrival (RisamOptions::collateralFactor). Two laps of the square
+// with a true closure from every lap-2 pose back to lap 1, then one arrival with two wrong
+// closures that agree with each other, 3 m off, and are far stiffer than the flexible
+// odometry and the true closures: graduated together they bend the map to themselves and push
+// the true closures around them out. With the check on the arrival is undone and the wrong
+// closures are fed again one at a time: the first does the same alone and is parked, the
+// second is rejected by its own graduation, and every true closure stays in.
+TEST(RisamContested, UndoesAnArrivalThatPushesAcceptedClosuresOut) {
+  const Eigen::Matrix3d odoInfo = Eigen::Vector3d(100, 100, 1e4).asDiagonal();
+  const Eigen::Matrix3d trueInfo = Eigen::Vector3d(100, 100, 1e4).asDiagonal();
+  const Eigen::Matrix3d wrongInfo = Eigen::Vector3d(1e6, 1e6, 1e8).asDiagonal();
+  const int n = 2 * square::kLap, wrongAt = n - 2;
+  auto run = [&](double collateralFactor) {
+    RisamOptions o;
+    o.collateralFactor = collateralFactor;
+    auto b = makeRisam(o);
+    for (int i = 0; i < n; ++i) {
+      BackendUpdate u = squareWalkStep(i, odoInfo, SE2());
+      if (i > square::kLap && i != wrongAt) {
+        auto c = std::make_shared<BetweenFactorSE2>(poseKey(i), poseKey(i - square::kLap), SE2(),
+                                                    trueInfo, FactorRole::LoopClosure);
+        c->setId(100 + i);
+        u.factors.push_back(c);
+      }
+      if (i == wrongAt)
+        for (int back : {8, 12}) {
+          auto c = std::make_shared<BetweenFactorSE2>(
+              poseKey(i), poseKey(i - back),
+              (square::walk(i - back).inverse() * square::walk(i)).inverse() * SE2(3.0, 0.0, 0.0),
+              wrongInfo, FactorRole::LoopClosure);
+          c->setId(1000 + back);
+          u.factors.push_back(c);
+        }
+      b->update(u);
+    }
+    return b;
+  };
+  auto trueRejected = [](const std::vector<FactorId>& rejected) {
+    return std::count_if(rejected.begin(), rejected.end(), [](FactorId id) { return id < 1000; });
+  };
+  auto off = run(0.0);
+  auto on = run(2.0);
+  const std::vector<FactorId> offRejected = off->rejected(), onRejected = on->rejected();
+  EXPECT_EQ(off->contestedUndone(), 0);
+  EXPECT_GT(trueRejected(offRejected), 4) << "the wrong pair no longer pushes true closures out";
+  EXPECT_GE(on->contestedUndone(), 1);
+  EXPECT_EQ(trueRejected(onRejected), 0);
+  EXPECT_GE(on->parkedFactors(), 1u);  // the other, alone, is rejected by its graduation
+  std::vector<FactorId> sorted = onRejected;
+  std::sort(sorted.begin(), sorted.end());
+  EXPECT_EQ(sorted, (std::vector<FactorId>{1008, 1012}));
 }
 
 }  // namespace
