@@ -233,9 +233,10 @@ FactorPtr RisamBackend::wrap(const FactorPtr& f, double mu, FactorId internal) c
 }
 
 UpdateResult RisamBackend::update(const BackendUpdate& u) {
-  int incoming = 0;
+  std::vector<FactorId> arriving;  // u's uncertain factors
   for (const FactorPtr& f : u.factors)
-    if (f && isUncertain(f->role())) ++incoming;
+    if (f && isUncertain(f->role())) arriving.push_back(f->id());
+  const int incoming = static_cast<int>(arriving.size());
   const bool checkRunaway = options_.runawayFactor > 0.0;
   const bool checkCollateral = options_.collateralFactor > 0.0;
   const Values& x = inner_->estimate();
@@ -273,13 +274,11 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   // Pushed-out closures are a cheap sign; the truncated cost (Σ trusted χ² + Σ min(χ², the
   // rejection test)) decides, so a true closure that pushes out wrong ones accepted before it
   // (a group bending the map) stays: undoing that arrival would cost more than it saves.
-  if (!(pushedOut(u, beforeSize) > limit) || !(undoCostChange(u, beforeSize) < 0.0)) return result;
-  std::vector<FactorId> ids;
-  for (const FactorPtr& f : u.factors)
-    if (f && isUncertain(f->role())) ids.push_back(f->id());
+  if (!(pushedOut(arriving, beforeSize) > limit) || !(undoCostChange(arriving, beforeSize) < 0.0))
+    return result;
   undoArrival(u, beforeSize, false);
   ++contestedUndone_;
-  if (incoming > 1) refeedSingly(std::move(ids));
+  if (incoming > 1) refeedSingly(std::move(arriving));
   return result;
 }
 
@@ -303,15 +302,15 @@ double chi2FromStorage(const Factor& f, const Values& x, const double* base, int
 
 }  // namespace
 
-int RisamBackend::pushedOut(const BackendUpdate& u, int beforeSize) const {
-  std::unordered_set<FactorId> arriving;
-  for (const FactorPtr& f : u.factors)
-    if (f) arriving.insert(f->id());
-  // Graduated factors outside u touch only variables from before the arrival.
+int RisamBackend::pushedOut(const std::vector<FactorId>& arriving, int beforeSize) const {
+  auto isArriving = [&](FactorId id) {
+    return std::find(arriving.begin(), arriving.end(), id) != arriving.end();
+  };
+  // Graduated factors outside the arrival touch only variables from before it.
   const Values& x = inner_->estimate();
   int count = 0;
   for (const auto& [id, g] : graduated_) {
-    if (g.parked || g.decided || arriving.count(id)) continue;
+    if (g.parked || g.decided || isArriving(id)) continue;
     const Factor& f = *g.original;
     const double threshold = rejectChi2(f.dim());
     if (chi2FromStorage(f, x, x.data(0), x.size()) > threshold &&
@@ -321,25 +320,20 @@ int RisamBackend::pushedOut(const BackendUpdate& u, int beforeSize) const {
   return count;
 }
 
-double RisamBackend::undoCostChange(const BackendUpdate& u, int beforeSize) const {
-  std::unordered_set<FactorId> arriving;
-  for (const FactorPtr& f : u.factors)
-    if (f) arriving.insert(f->id());
+double RisamBackend::undoCostChange(const std::vector<FactorId>& arriving, int beforeSize) const {
   const Values& x = inner_->estimate();
-  double kept = 0.0, undone = 0.0;
+  double undone = 0.0;
   for (const auto& f : originals_.factors()) {
     const bool uncertain = graduated_.count(f->id()) > 0;
     const double threshold = uncertain ? rejectChi2(f->dim()) : 0.0;
-    auto cost = [&](double chi2) { return uncertain ? std::min(chi2, threshold) : chi2; };
-    kept += cost(chi2FromStorage(*f, x, x.data(0), x.size()));
     const double before = chi2FromStorage(*f, x, runawayStart_.data(), beforeSize);
-    if (arriving.count(f->id()) && uncertain)
+    if (std::find(arriving.begin(), arriving.end(), f->id()) != arriving.end())
       undone += threshold;  // undone: the arrival's closures rejected
     else if (std::isfinite(before))
-      undone += cost(before);
+      undone += uncertain ? std::min(before, threshold) : before;
     // else: a trusted factor of the arrival's new variables, at their initial values (0)
   }
-  return undone - kept;
+  return undone - truncatedCost();
 }
 
 void RisamBackend::refeedSingly(std::vector<FactorId> ids) {

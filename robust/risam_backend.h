@@ -188,13 +188,13 @@ class RisamBackend : public DecoratorBackend {
   /// at runawayStart_ (its first beforeSize variables; new ones at u.initial), u's uncertain
   /// factors parked; with `settle`, optimized there.
   void undoArrival(const BackendUpdate& u, int beforeSize, bool settle);
-  /// Uncertain factors outside u, in the inner backend and undecided, that pass the rejection
-  /// test at runawayStart_ and fail it at the estimate.
-  int pushedOut(const BackendUpdate& u, int beforeSize) const;
-  /// The truncated cost (Σ trusted χ² + Σ uncertain min(χ², rejection test), over every
-  /// factor) of undoing u minus that of keeping it: the estimate at runawayStart_ with u's
-  /// uncertain factors rejected, against the estimate now. Negative: undoing is cheaper.
-  double undoCostChange(const BackendUpdate& u, int beforeSize) const;
+  /// Uncertain factors other than the arriving ones, in the inner backend and undecided, that
+  /// pass the rejection test at runawayStart_ and fail it at the estimate.
+  int pushedOut(const std::vector<FactorId>& arriving, int beforeSize) const;
+  /// The truncated cost (truncatedCost(), over every factor) of undoing an arrival minus that
+  /// of keeping it: the estimate at runawayStart_ with the arriving uncertain factors
+  /// rejected, against the estimate now. Negative: undoing is cheaper.
+  double undoCostChange(const std::vector<FactorId>& arriving, int beforeSize) const;
   /// The parked ids fed again, each as an arrival of its own, largest χ² first.
   void refeedSingly(std::vector<FactorId> ids);
   /// Still in the inner backend, undecided, and χ² above parkFactor × its tail test.
