@@ -293,11 +293,7 @@ double chi2FromStorage(const Factor& f, const Values& x, const double* base, int
     if (s < 0 || s >= size) return std::numeric_limits<double>::quiet_NaN();
     at[k] = base + static_cast<size_t>(s) * kValueStride;
   }
-  double r[kMaxResidualDim];
-  f.evaluate(at.data(), r, nullptr);
-  double sum = 0.0;
-  for (int i = 0; i < f.dim(); ++i) sum += r[i] * r[i];
-  return sum;
+  return f.chi2(at.data());
 }
 
 }  // namespace
@@ -354,11 +350,25 @@ void RisamBackend::refeedSingly(std::vector<FactorId> ids) {
   } refeeding(refeeding_);
   for (const auto& [chi2, id] : order) {
     if (!graduated_[id].parked) continue;  // came back with an earlier one (it fit)
-    unpark(id);
     BackendUpdate one;
     one.factors.push_back(graduated_[id].original);
+    forget(id);   // a new arrival again (see forget)
     update(one);  // one uncertain factor: undone and parked again, or in
   }
+}
+
+void RisamBackend::forget(FactorId id) {
+  auto it = graduated_.find(id);
+  if (it == graduated_.end()) return;
+  if (it->second.parked) unpark(id);
+  toPark_.erase(std::remove(toPark_.begin(), toPark_.end(), id), toPark_.end());
+  const Factor& f = *it->second.original;
+  for (int k = 0; k < f.size(); ++k) {
+    auto ids = byKey_.find(f.key(k));
+    if (ids != byKey_.end())
+      ids->second.erase(std::remove(ids->second.begin(), ids->second.end(), id), ids->second.end());
+  }
+  graduated_.erase(it);
 }
 
 void RisamBackend::undoArrival(const BackendUpdate& u, int beforeSize, bool settle) {

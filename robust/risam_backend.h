@@ -197,6 +197,12 @@ class RisamBackend : public DecoratorBackend {
   double undoCostChange(const std::vector<FactorId>& arriving, int beforeSize) const;
   /// The parked ids fed again, each as an arrival of its own, largest χ² first.
   void refeedSingly(std::vector<FactorId> ids);
+  /// Drops a factor's state (graduated_, parked_, toPark_, byKey_) so that it can arrive
+  /// again as new. A parked factor merely unparked for that kept the internal id of the
+  /// wrapper it had before parking, which the inner backend no longer holds: a regraduation
+  /// of every closure before the arrival committed (the gate tightening) asked the inner
+  /// backend to remove it (intel + 1000 local, seed 5: "removal of unknown factor id").
+  void forget(FactorId id);
   /// Still in the inner backend, undecided, and χ² above parkFactor × its tail test.
   bool farOut(const Graduated& g, const Values& x) const;
   /// The far-out ones of ids, after their graduation: toPark_ (parked at the next update).

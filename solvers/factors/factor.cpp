@@ -24,19 +24,31 @@ Factor::Factor(std::initializer_list<std::pair<Key, VarType>> vars, int dim, Fac
   }
 }
 
-Eigen::VectorXd Factor::whitenedError(const Values& values) const {
+std::array<const double*, kMaxFactorKeys> Factor::storageIn(const Values& values) const {
   std::array<const double*, kMaxFactorKeys> x{};
   for (int i = 0; i < size(); ++i) {
     const int s = values.slot(key(i));
     if (s < 0) throw std::out_of_range("missing variable " + keyToString(key(i)));
     x[i] = values.data(s);
   }
+  return x;
+}
+
+Eigen::VectorXd Factor::whitenedError(const Values& values) const {
   Eigen::VectorXd r(dim());
-  evaluate(x.data(), r.data(), nullptr);
+  evaluate(storageIn(values).data(), r.data(), nullptr);
   return r;
 }
 
-double Factor::chi2(const Values& values) const { return whitenedError(values).squaredNorm(); }
+double Factor::chi2(const Values& values) const { return chi2(storageIn(values).data()); }
+
+double Factor::chi2(const double* const* x) const {
+  // Aligned like a VectorXd's storage so the sum runs in the same order as
+  // whitenedError(values).squaredNorm() did: results stay bit-identical.
+  alignas(EIGEN_MAX_ALIGN_BYTES) double r[kMaxResidualDim];
+  evaluate(x, r, nullptr);
+  return Eigen::Map<const Eigen::VectorXd, Eigen::AlignedMax>(r, dim()).squaredNorm();
+}
 
 template <int D>
 Eigen::Matrix<double, D, D> sqrtInformation(const Eigen::Matrix<double, D, D>& info) {

@@ -67,13 +67,19 @@ class Factor {
 
   /// Whitened error at values (all keys must be present).
   Eigen::VectorXd whitenedError(const Values& values) const;
-  /// rᵀr at values.
+  /// rᵀr at values (all keys must be present); no allocation, so loops over factors may
+  /// call it freely.
   double chi2(const Values& values) const;
+  /// rᵀr with x[i] → storage of key(i), as evaluate() takes it (e.g. a snapshot's storage).
+  double chi2(const double* const* x) const;
 
  protected:
   Factor(std::initializer_list<std::pair<Key, VarType>> vars, int dim, FactorRole role);
 
  private:
+  /// Storage of each key in values; throws std::out_of_range for a missing one.
+  std::array<const double*, kMaxFactorKeys> storageIn(const Values& values) const;
+
   std::array<Key, kMaxFactorKeys> keys_{};
   std::array<VarType, kMaxFactorKeys> varTypes_{};
   int numKeys_ = 0;

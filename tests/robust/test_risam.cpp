@@ -93,16 +93,23 @@ TEST(RisamOnline, KeepsManhattansStiffClosuresAndGraduatesCheaply) {
   EXPECT_LE(c.innerUpdates, c.updates + c.closureUpdates / 2);
 }
 
+// `count` wrong closures as loopd-outliers adds them (`mode`, `seed`) to `dataset` (a
+// loadPrefix spec), then cut to its first `poses` poses (0: all of them).
+PoseGraphProblem withOutliers(const std::string& dataset, int count, tools::OutlierMode mode,
+                              int seed, int poses = 0) {
+  tools::OutlierOptions o;
+  o.count = count;
+  o.mode = mode;
+  o.seed = seed;
+  const tools::OutlierResult data = tools::addOutliers(test::loadPrefix(dataset), o);
+  return buildProblem(poses > 0 ? test::cutPrefix(data.graph, poses) : data.graph);
+}
+
 // `count` local wrong closures (loopd-outliers --mode local --seed 1) on `dataset`, cut to its
 // first `poses` poses, run online: the estimate stays finite and the odometry χ² after
 // optimize() below 1000 (a runaway reaches 1e25 or inf).
 void expectNoRunaway(const char* dataset, int count, int poses) {
-  tools::OutlierOptions o;
-  o.count = count;
-  o.mode = tools::OutlierMode::Local;
-  o.seed = 1;
-  const tools::OutlierResult data = tools::addOutliers(test::loadPrefix(dataset), o);
-  const PoseGraphProblem p = buildProblem(test::cutPrefix(data.graph, poses));
+  const PoseGraphProblem p = withOutliers(dataset, count, tools::OutlierMode::Local, 1, poses);
   const OnlineCounts c = runOnline(p);
   std::printf(
       "[risam] %s:%d + local outliers: first non-finite update %d, odometry chi2 %.6g, "
@@ -140,12 +147,7 @@ TEST(RisamOnline, RegraduatesEveryClosureWithoutRunningAwayWhenTheGateTightens) 
 // (RisamOptions::parkFactor): the same decisions as with every factor kept in, and a Bayes
 // tree without the wrong closures' fill.
 TEST(RisamParking, TakesFarOutClosuresOutOfTheTreeWithTheSameDecisions) {
-  tools::OutlierOptions o;
-  o.count = 60;
-  o.mode = tools::OutlierMode::Random;
-  o.seed = 1;
-  const tools::OutlierResult data = tools::addOutliers(test::loadPrefix("sphere2500.g2o:300"), o);
-  const PoseGraphProblem p = buildProblem(data.graph);
+  const PoseGraphProblem p = withOutliers("sphere2500.g2o:300", 60, tools::OutlierMode::Random, 1);
   RisamOptions keep;
   keep.parkFactor = 0.0;
   keep.collateralFactor = 0.0;  // a contested arrival's closures are parked too
@@ -343,6 +345,27 @@ TEST(RisamContested, UndoesAnArrivalThatPushesAcceptedClosuresOut) {
   std::vector<FactorId> sorted = onRejected;
   std::sort(sorted.begin(), sorted.end());
   EXPECT_EQ(sorted, (std::vector<FactorId>{1008, 1012}));
+}
+
+// intel's first 350 poses with the wrong closures loopd-outliers puts among them for --mode
+// local --count 1000 --seed 5. A contested arrival is undone and its closures are fed again
+// one at a time. While one of them arrived again the gate tightened and every closure was
+// graduated again, the re-fed one under the internal id of the wrapper it had before it was
+// parked: the inner iSAM2 was asked to remove a factor it no longer held, and the run stopped
+// ("removal of unknown factor id"). A re-fed closure now arrives as a new one.
+TEST(RisamContested, FeedsTheClosuresOfAnUndoneArrivalAgainAsNewOnes) {
+  const PoseGraphProblem p = withOutliers("intel.g2o", 1000, tools::OutlierMode::Local, 5, 350);
+  const std::unique_ptr<Backend> backend = makeBackend("risam");
+  auto& b = dynamic_cast<RisamBackend&>(*backend);
+  OnlineCounts c;
+  ASSERT_NO_THROW(c = runOnline(p, &b));
+  std::printf(
+      "[risam] intel:350 + local outliers (seed 5): contested arrivals undone %d, "
+      "rejected %zu, odometry chi2 %.6g\n",
+      b.contestedUndone(), c.rejectedFinal, c.trustedChi2);
+  EXPECT_GE(b.contestedUndone(), 1);
+  EXPECT_EQ(c.firstNonFinite, -1);
+  EXPECT_LT(c.trustedChi2, 1000.0);
 }
 
 }  // namespace

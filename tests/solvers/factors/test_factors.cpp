@@ -632,6 +632,24 @@ TEST(Factor, WhitenedErrorThrowsOnMissingKey) {
   EXPECT_THROW(b.chi2(v), std::out_of_range);
 }
 
+// chi2 evaluates into a stack buffer (no allocation): the same bits as the whitened error's
+// squared norm, from a Values or from the variables' storage directly.
+TEST(Factor, Chi2IsTheWhitenedErrorsSquaredNormBitForBit) {
+  const std::vector<Case> cases = allCases();
+  size_t away = 0;  // cases not at their measurement (a zero chi2 would prove little)
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const Factor& f = *c.factor;
+    const double expected = f.whitenedError(c.values).squaredNorm();
+    EXPECT_EQ(f.chi2(c.values), expected);
+    std::array<const double*, kMaxFactorKeys> x{};
+    for (int i = 0; i < f.size(); ++i) x[i] = c.values.data(c.values.slot(f.key(i)));
+    EXPECT_EQ(f.chi2(x.data()), expected);
+    away += expected > 0.0 ? 1 : 0;
+  }
+  EXPECT_GT(away, cases.size() / 2);
+}
+
 TEST(Factor, CloneGivesSameResidualAndJacobians) {
   for (const Case& c : allCases()) {
     SCOPED_TRACE(c.name);
