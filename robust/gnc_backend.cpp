@@ -47,13 +47,7 @@ Values GncBackend::trustedLinearStart(const std::vector<char>& alsoUse) const {
   FactorGraph trusted;
   for (int i = 0; i < graph_.size(); ++i)
     if (!isUncertain(graph_[i]->role()) || (!alsoUse.empty() && alsoUse[i])) trusted.add(graph_[i]);
-  Key anchor = 0;
-  bool found = false;
-  for (int s = 0; s < estimate_.size(); ++s)
-    if (keyKind(estimate_.key(s)) == KeyKind::Pose && (!found || estimate_.key(s) < anchor))
-      anchor = estimate_.key(s), found = true;
-  if (!found || trusted.empty()) return Values();
-  return initializeLinear(trusted, estimate_, anchor);
+  return initializeLinearFromLowestPose(trusted, estimate_);
 }
 
 void GncBackend::optimize() {

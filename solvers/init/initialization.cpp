@@ -292,4 +292,14 @@ Values initializeLinear(const FactorGraph& graph, const Values& guess, Key ancho
   return initializeOrientationFirst2D(graph, guess, anchor);
 }
 
+Values initializeLinearFromLowestPose(const FactorGraph& graph, const Values& guess) {
+  Key anchor = 0;
+  bool found = false;
+  for (int s = 0; s < guess.size(); ++s)
+    if (keyKind(guess.key(s)) == KeyKind::Pose && (!found || guess.key(s) < anchor))
+      anchor = guess.key(s), found = true;
+  if (!found || graph.empty()) return Values();
+  return initializeLinear(graph, guess, anchor);
+}
+
 }  // namespace loopd

@@ -18,4 +18,8 @@ Values initializeChordal3D(const FactorGraph& graph, const Values& guess, Key an
 /// Picks the one that fits the anchor's type.
 Values initializeLinear(const FactorGraph& graph, const Values& guess, Key anchor);
 
+/// initializeLinear anchored at guess's lowest pose key; empty if guess has no pose or the
+/// graph no factor.
+Values initializeLinearFromLowestPose(const FactorGraph& graph, const Values& guess);
+
 }  // namespace loopd
