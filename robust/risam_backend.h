@@ -185,6 +185,9 @@ class RisamBackend : public DecoratorBackend {
   /// Arrivals (and single closures fed again) undone for pushing accepted closures out
   /// (RisamOptions::collateralFactor).
   int contestedUndone() const { return contestedUndone_; }
+  /// optimize() calls that took the second looks (drop check, fresh start): only those whose
+  /// answer rejects something.
+  int secondLooks() const { return secondLooks_; }
   /// optimize() calls whose fresh start was kept (RisamOptions::freshStart).
   int freshStartsKept() const { return freshStartsKept_; }
   /// Closures rejected by optimize()'s drop check (RisamOptions::dropBending).
@@ -294,6 +297,7 @@ class RisamBackend : public DecoratorBackend {
   int absorbedUpdates_ = 0;
   int runawaysUndone_ = 0;
   int contestedUndone_ = 0;
+  int secondLooks_ = 0;
   int freshStartsKept_ = 0;
   int droppedBending_ = 0;
   bool refeeding_ = false;            // refeedSingly: the factors are in originals_ already

@@ -433,5 +433,22 @@ TEST(RisamFinal, DropsAWrongClosureThatHoldsTheMapBent) {
   EXPECT_LT(unbent.trueEdgesChi2, 1.01 * unbent.optimum);
 }
 
+// parking-garage without outliers: the tightened gate fails a few true closures, the tail
+// none, so the answer rejects nothing and optimize() takes no second looks (they cost a fifth
+// of the online time there when they were triggered at the gate).
+TEST(RisamFinal, TakesNoSecondLooksWhenTheAnswerRejectsNothing) {
+  const PoseGraphProblem p = buildProblem(test::loadPrefix("parking-garage.g2o"));
+  const std::unique_ptr<RisamBackend> b = makeRisam(RisamOptions{});
+  const OnlineCounts c = runOnline(p, b.get());
+  EXPECT_EQ(c.rejectedFinal, 0u);
+  EXPECT_EQ(b->secondLooks(), 0);
+  // With outliers it does take them: intel's first 300 poses + local outliers (seed 2).
+  const std::unique_ptr<RisamBackend> o = makeRisam(RisamOptions{});
+  const OnlineCounts co =
+      runOnline(withOutliers("intel.g2o", 1000, tools::OutlierMode::Local, 2, 300), o.get());
+  EXPECT_GT(co.rejectedFinal, 0u);
+  EXPECT_EQ(o->secondLooks(), 1);
+}
+
 }  // namespace
 }  // namespace loopd
