@@ -77,10 +77,10 @@ OnlineCounts runOnline(const PoseGraphProblem& p, RisamBackend* given = nullptr,
 TEST(RisamOnline, KeepsManhattansStiffClosuresAndGraduatesCheaply) {
   const PoseGraphProblem p = buildProblem(test::loadPrefix("manhattan.g2o:1500"));
   const OnlineCounts c = runOnline(p);
-  std::printf("[risam] manhattan:1500 updates %d (closures %d) inner updates %d, rejected online "
-              "%zu, after optimize %zu, chi2 %.6g\n",
-              c.updates, c.closureUpdates, c.innerUpdates, c.rejectedOnline, c.rejectedFinal,
-              c.chi2Final);
+  std::printf(
+      "[risam] manhattan:1500 updates %d (closures %d) inner updates %d, rejected online "
+      "%zu, after optimize %zu, chi2 %.6g\n",
+      c.updates, c.closureUpdates, c.innerUpdates, c.rejectedOnline, c.rejectedFinal, c.chi2Final);
   // Before the fix the μ = 1 step weighted each closure at iSAM2's linearization point, which
   // for a stiff closure was still χ² ~1e4 away from the estimate the convex step had just
   // fitted: 100 true closures were rejected online here (1 after optimize()'s retry, chi2
