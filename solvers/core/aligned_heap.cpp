@@ -1,6 +1,6 @@
 // The program's operator new, replaced: every block of 64 bytes or more starts on a 64-byte
-// boundary (one AVX-512 packet). Linked into the programs that solve (loopd-solve, loopd, the
-// tests) by loopd_use_aligned_heap() in CMake, not into the libraries.
+// boundary (one AVX-512 packet). Linked into the programs that solve (loopd-solve, loopd,
+// loopd-eval, the tests) by loopd_use_aligned_heap() in CMake, not into the libraries.
 //
 // Why: Eigen vectorizes a reduction over a buffer of unknown alignment (a Map over a
 // std::vector, a dense clique block) by first peeling the elements before its first aligned
@@ -27,9 +27,9 @@ static_assert(kHeaderBytes >= sizeof(std::size_t) && kPacketBytes % kHeaderBytes
 // the header. posix_memalign did the same but was slower (sphere2500 isam2 online +8%).
 void* allocate(std::size_t n) {
   const bool large = n >= kPacketBytes;
-  // malloc's blocks are aligned to max_align_t (16 bytes on glibc/x86-64): at most
-  // kPacketBytes - 16 more to the boundary.
-  const std::size_t extra = kHeaderBytes + (large ? kPacketBytes - alignof(std::max_align_t) : 0);
+  // malloc's blocks are aligned to max_align_t (the header's size), so header and padding to
+  // the next boundary together take at most one packet.
+  const std::size_t extra = large ? kPacketBytes : kHeaderBytes;
   if (n > static_cast<std::size_t>(-1) - extra) throw std::bad_alloc();
   char* raw = static_cast<char*>(std::malloc(n + extra));
   if (raw == nullptr) throw std::bad_alloc();
