@@ -122,6 +122,18 @@ std::vector<AmbiguousFactor> ambiguousFactors(const PoseGraphProblem& p) {
   return out;
 }
 
+BackendUpdate wholeProblemUpdate(const PoseGraphProblem& p) {
+  BackendUpdate all;
+  std::vector<char> alternative(p.graph.size(), 0);
+  for (const AmbiguousGroup& g : p.ambiguous)
+    for (int f : g.factors) alternative[f] = 1;
+  for (int f = 0; f < p.graph.size(); ++f)
+    if (!alternative[f]) all.factors.push_back(p.graph[f]);
+  all.ambiguous = ambiguousFactors(p);
+  all.initial = p.initial;
+  return all;
+}
+
 void storeEstimate(const Values& estimate, io::Dataset& ds) {
   auto store = [&](io::Vertex& v) {
     const int s = estimate.slot(vertexKey(v));

@@ -41,6 +41,11 @@ AmbiguousFactor ambiguousFactor(const PoseGraphProblem& problem, int group);
 /// Every group, in file order.
 std::vector<AmbiguousFactor> ambiguousFactors(const PoseGraphProblem& problem);
 
+/// The whole problem as one update, as `loopd-solve` solves in batch: every factor but the
+/// groups' alternatives, the groups as ambiguous measurements (flattenAmbiguous() for a
+/// backend without them), and the initial values.
+BackendUpdate wholeProblemUpdate(const PoseGraphProblem& problem);
+
 /// Copies an estimate back into a dataset's vertices (same ids), for the writers.
 void storeEstimate(const Values& estimate, io::Dataset& dataset);
 

@@ -35,10 +35,7 @@ Data intelWithOutliers() {
   d.outliers.insert(r.outliers.begin(), r.outliers.end());
   auto lm = makeBackend("lm");
   const PoseGraphProblem p = buildProblem(clean);
-  BackendUpdate all;
-  all.factors = p.graph.factors();
-  all.initial = p.initial;
-  lm->update(all);
+  lm->update(wholeProblemUpdate(p));
   d.optimum = lm->chi2();
   return d;
 }

@@ -382,10 +382,7 @@ FinalOnIntel finalOnIntel(int poses, int seed, RisamOptions options) {
       buildProblem(test::loadPrefix("intel.g2o:" + std::to_string(poses)));
   FinalOnIntel r;
   auto lm = makeBackend("lm");
-  BackendUpdate all;
-  all.factors = clean.graph.factors();
-  all.initial = clean.initial;
-  lm->update(all);
+  lm->update(wholeProblemUpdate(clean));
   lm->optimize();
   r.optimum = lm->chi2();
   const std::unique_ptr<RisamBackend> b = makeRisam(options);

@@ -32,14 +32,6 @@ struct RunResult {
   double seconds = 0.0;
 };
 
-// Every factor and the file's values in one update (how loopd-solve solves in batch).
-void feedAll(Backend& b, const PoseGraphProblem& p) {
-  BackendUpdate all;
-  all.factors = p.graph.factors();
-  all.initial = p.initial;
-  b.update(all);
-}
-
 // Feeds the problem pose by pose (as loopd-solve --incremental does), or all at once.
 std::unique_ptr<Backend> solve(const std::string& variant, const PoseGraphProblem& p,
                                bool incremental) {
@@ -47,7 +39,7 @@ std::unique_ptr<Backend> solve(const std::string& variant, const PoseGraphProble
   if (incremental)
     tools::runOnline(*b, p, /*quiet=*/true);
   else
-    feedAll(*b, p);
+    b->update(wholeProblemUpdate(p));
   return b;
 }
 
@@ -250,7 +242,7 @@ RunResult solveGnc(const GncOptions& g, const tools::OutlierResult& data, const 
                    const std::string& label) {
   const PoseGraphProblem p = buildProblem(data.graph);
   GncBackend b(BackendOptions{}, g);
-  feedAll(b, p);
+  b.update(wholeProblemUpdate(p));
   RunResult r = score(b, p, data);
   std::printf("[robust] gnc-tls %s: recall %.3f precision %.3f chi2(true) %.6g vs %.6g (%s)\n",
               label.c_str(), r.scores.recall, r.scores.precision, r.inlierChi2, ref.optimumChi2,

@@ -59,15 +59,8 @@ int run(const tools::SolveOptions& opt) {
   if (opt.incremental) {
     online = tools::runOnline(*backend, problem, opt.quiet);
   } else {
-    BackendUpdate all;
-    std::vector<char> alternative(problem.graph.size(), 0);
-    for (const AmbiguousGroup& g : problem.ambiguous)
-      for (int f : g.factors) alternative[f] = 1;
-    for (int f = 0; f < problem.graph.size(); ++f)
-      if (!alternative[f]) all.factors.push_back(problem.graph[f]);
-    all.ambiguous = measurements;
+    BackendUpdate all = wholeProblemUpdate(problem);
     if (!backend->handlesAmbiguous()) flattenAmbiguous(all);
-    all.initial = problem.initial;
     backend->update(all);
   }
   const double solveSeconds = since(tSolve);

@@ -48,10 +48,7 @@ TEST_P(BatchSolverTest, ReachesBestKnownOptimum) {
   BackendOptions options;
   options.maxIterations = c.maxIterations;
   auto backend = makeBackend(solver, options);
-  BackendUpdate all;
-  all.factors = problem.graph.factors();
-  all.initial = problem.initial;
-  backend->update(all);
+  backend->update(wholeProblemUpdate(problem));
   const double chi2 = backend->chi2();
   if (solver == "gn" && std::string(c.file) == "victoria_park.txt") {
     // Undamped Gauss–Newton overshoots from this start; it must stop, not diverge.
@@ -79,10 +76,7 @@ TEST(BatchSolver, FileStartStillReachesOptimumOnEasyData) {
   BackendOptions o;
   o.linearInitialization = false;
   auto backend = makeBackend("lm", o);
-  BackendUpdate all;
-  all.factors = problem.graph.factors();
-  all.initial = problem.initial;
-  backend->update(all);
+  backend->update(wholeProblemUpdate(problem));
   EXPECT_LE(backend->chi2(), 45.004696 * (1.0 + 1e-4));
 }
 
@@ -90,10 +84,7 @@ TEST(BatchSolver, MarginalsAreSymmetricPositiveDefinite) {
   const io::Dataset ds = io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/tinyGrid3D.g2o");
   const PoseGraphProblem problem = buildProblem(ds);
   auto backend = makeBackend("lm");
-  BackendUpdate all;
-  all.factors = problem.graph.factors();
-  all.initial = problem.initial;
-  backend->update(all);
+  backend->update(wholeProblemUpdate(problem));
   std::vector<Key> keys;
   for (Key k : backend->estimate().keys())
     if (k != problem.firstPose) keys.push_back(k);
@@ -116,10 +107,7 @@ TEST(BatchSolver, RejectsUpdatesThatReferToUnknownThings) {
   missingValue.factors = problem.graph.factors();  // no initial values
   EXPECT_THROW(backend->update(missingValue), std::invalid_argument);
   EXPECT_EQ(backend->graph().size(), 0);
-  BackendUpdate all;
-  all.factors = problem.graph.factors();
-  all.initial = problem.initial;
-  backend->update(all);
+  backend->update(wholeProblemUpdate(problem));
   BackendUpdate unknownRemoval;
   unknownRemoval.removals = {99999};
   EXPECT_THROW(backend->update(unknownRemoval), std::invalid_argument);
@@ -134,9 +122,7 @@ TEST(BatchSolver, RemovingAFactorEqualsNeverAddingIt) {
   const PoseGraphProblem problem = buildProblem(ds);
   const int dropped = problem.graph.size() - 1;  // a loop closure at the end of the file
   auto withRemoval = makeBackend("lm");
-  BackendUpdate all;
-  all.factors = problem.graph.factors();
-  all.initial = problem.initial;
+  const BackendUpdate all = wholeProblemUpdate(problem);
   withRemoval->update(all);
   BackendUpdate removal;
   removal.removals = {problem.graph[dropped]->id()};

@@ -45,10 +45,7 @@ TEST(AlignedHeap, SolvesTheSameWhereverTheHeapPutsTheBuffers) {
   for (int pad = 0; pad < 12; ++pad) {
     pads.emplace_back(new char[8 + 16 * pad]);
     auto lm = makeBackend("lm");
-    BackendUpdate all;
-    all.factors = p.graph.factors();
-    all.initial = p.initial;
-    lm->update(all);
+    lm->update(wholeProblemUpdate(p));
     const Values& x = lm->estimate();
     const std::vector<double> bits(x.data(0), x.data(0) + x.size() * kValueStride);
     if (pad == 0)

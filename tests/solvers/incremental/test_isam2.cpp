@@ -407,10 +407,7 @@ TEST(Isam2, NewestPoseMarginalIsInTheRootAndEqualsGeneralPath) {
 TEST(Isam2, VictoriaParkCovariancesAreSymmetricPositiveDefinite) {
   const PoseGraphProblem p = load("victoria_park.txt");
   auto backend = makeBackend("isam2");
-  BackendUpdate all;
-  all.factors = p.graph.factors();
-  all.initial = p.initial;
-  backend->update(all);
+  backend->update(wholeProblemUpdate(p));
   backend->optimize();
   std::vector<Key> keys;
   for (int s = 0; s < p.initial.size(); ++s) {

@@ -103,5 +103,22 @@ TEST(Hypotheses, ProblemAndScheduleKeepGroupsApart) {
   EXPECT_EQ(a.alternatives[1]->id(), 6u);
 }
 
+TEST(Hypotheses, WholeProblemUpdateCarriesGroupsOnce) {
+  // Edges 0-4 odometry, 5-6 the group, 7 an ordinary closure after it.
+  const Dataset d = read(vertices(6) + odometry(6) + "HYPOTHESES 2 null\n" + edge(5, 0) +
+                         edge(4, 1) + edge(3, 0));
+  const PoseGraphProblem p = buildProblem(d);
+  const BackendUpdate u = wholeProblemUpdate(p);
+  std::vector<FactorId> plain;
+  for (const FactorPtr& f : u.factors) plain.push_back(f->id());
+  EXPECT_EQ(plain, (std::vector<FactorId>{0, 1, 2, 3, 4, 7}));
+  ASSERT_EQ(u.ambiguous.size(), 1u);
+  EXPECT_TRUE(u.ambiguous[0].nullHypothesis);
+  ASSERT_EQ(u.ambiguous[0].alternatives.size(), 2u);
+  EXPECT_EQ(u.ambiguous[0].alternatives[0]->id(), 5u);
+  EXPECT_EQ(u.initial.size(), 6);
+  EXPECT_TRUE(u.removals.empty());
+}
+
 }  // namespace
 }  // namespace loopd::io
