@@ -22,9 +22,13 @@
 #include "solvers/factors/factor.h"
 #include "solvers/factors/landmark_factors.h"
 #include "solvers/factors/prior_factors.h"
+#include "tests/solvers/geometry/matrix_forms.h"
 
 namespace loopd {
 namespace {
+
+using test::homogeneous;
+using test::randomUnit;
 
 using Mat4 = Eigen::Matrix4d;
 using Eigen::MatrixXd;
@@ -46,11 +50,6 @@ Eigen::Matrix<double, N, N> randomInformation(std::mt19937& rng) {
   return L * L.transpose();
 }
 
-Vec3 randomUnit(std::mt19937& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  return Vec3(n(rng), n(rng), n(rng)).normalized();
-}
-
 SE2 randomSE2(std::mt19937& rng) {
   std::uniform_real_distribution<double> u(-5.0, 5.0), a(-kPi, kPi);
   return {u(rng), u(rng), a(rng)};
@@ -62,21 +61,6 @@ SE3 randomSE3(std::mt19937& rng) {
 }
 
 SE3 rotationOnly(const Vec3& w) { return {expSO3(w), Vec3::Zero()}; }
-
-Mat4 homogeneous(const SE3& X) {
-  Mat4 T = Mat4::Identity();
-  T.topLeftCorner<3, 3>() = X.R;
-  T.topRightCorner<3, 1>() = X.t;
-  return T;
-}
-
-Eigen::Matrix3d homogeneous(const SE2& X) {
-  Eigen::Matrix3d T = Eigen::Matrix3d::Identity();
-  T.topLeftCorner<2, 2>() = rot2(X.theta);
-  T(0, 2) = X.x;
-  T(1, 2) = X.y;
-  return T;
-}
 
 // Log of SE(3), built independently of solvers/geometry: angle-axis from Eigen, and
 // ρ = V⁻¹ t with V = I + (1−cosθ)/θ² [φ]× + (θ−sinθ)/θ³ [φ]×².

@@ -11,19 +11,17 @@
 #include "solvers/geometry/se2.h"
 #include "solvers/geometry/se3.h"
 #include "solvers/geometry/so3.h"
+#include "tests/solvers/geometry/matrix_forms.h"
 
 namespace loopd {
 namespace {
 
+using test::homogeneous;
+using test::randomUnit;
+
 using Mat4 = Eigen::Matrix4d;
 
 constexpr double kPi = M_PI;
-
-Vec3 randomUnit(std::mt19937& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  Vec3 v(n(rng), n(rng), n(rng));
-  return v.normalized();
-}
 
 Vec3 randomRotVec(std::mt19937& rng, double maxAngle) {
   std::uniform_real_distribution<double> u(0.0, maxAngle);
@@ -43,21 +41,6 @@ SE3 randomSE3(std::mt19937& rng) { return expSE3(randomTwist(rng, 3.0)); }
 bool isRotation(const Mat3& R, double tol = 1e-12) {
   return (R.transpose() * R - Mat3::Identity()).norm() < tol &&
          std::abs(R.determinant() - 1.0) < tol;
-}
-
-Mat4 homogeneous(const SE3& X) {
-  Mat4 T = Mat4::Identity();
-  T.topLeftCorner<3, 3>() = X.R;
-  T.topRightCorner<3, 1>() = X.t;
-  return T;
-}
-
-Eigen::Matrix3d homogeneous(const SE2& X) {
-  Eigen::Matrix3d T = Eigen::Matrix3d::Identity();
-  T.topLeftCorner<2, 2>() = rot2(X.theta);
-  T(0, 2) = X.x;
-  T(1, 2) = X.y;
-  return T;
 }
 
 // Independent dense matrix exponential: scaling and squaring with a Taylor series.
