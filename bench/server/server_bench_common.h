@@ -36,7 +36,7 @@
 #include "loopd/estimate_t.hpp"
 #include "loopd/status_t.hpp"
 #include "solvers/io/dataset_reader.h"
-#include "tools/common/edge_factor.h"
+#include "tools/common/feed_order.h"
 
 extern char** environ;
 
@@ -93,50 +93,23 @@ struct Schedule {
 /// ends have all appeared. Factor ids = file edge indices. Robot ids are offset by robotOffset.
 inline Schedule buildSchedule(const io::Dataset& ds, int robotsWanted, bool interleave, long poses,
                               int robotOffset = 0) {
-  std::vector<std::int64_t> ids;
-  for (const auto& v : ds.poses) ids.push_back(v.id);
-  std::sort(ids.begin(), ids.end());
-  if (poses >= 0 && static_cast<size_t>(poses) < ids.size()) ids.resize(static_cast<size_t>(poses));
-  if (ids.empty()) throw std::runtime_error("no poses in " + ds.path);
-  const size_t n = ids.size();
-  const size_t robots = std::min<size_t>(static_cast<size_t>(std::max(1, robotsWanted)), n);
-  std::unordered_map<std::int64_t, int> robotOf;
-  std::vector<std::vector<std::int64_t>> segment(robots);
-  for (size_t i = 0; i < n; ++i) {
-    const int r = static_cast<int>(i * robots / n);
-    robotOf[ids[i]] = r;
-    segment[static_cast<size_t>(r)].push_back(ids[i]);
-  }
-  std::vector<std::int64_t> order;
-  if (!interleave) order = ids;
-  else
-    for (size_t k = 0; order.size() < n; ++k)
-      for (size_t r = 0; r < robots; ++r)
-        if (k < segment[r].size()) order.push_back(segment[r][k]);
-  std::unordered_map<std::int64_t, size_t> rank;
-  for (size_t i = 0; i < order.size(); ++i) rank[order[i]] = i;
-
+  const tools::FeedOrder feed(ds, poses, robotsWanted, interleave);
+  const std::vector<std::int64_t>& order = feed.poses();
   Schedule s;
   s.is3d = ds.is3d;
-  s.robots = static_cast<int>(robots);
-  s.steps.resize(n);
-  std::vector<bool> started(robots, false);
-  for (size_t i = 0; i < n; ++i) {
-    const int r = robotOf[order[i]];
+  s.robots = feed.robots();
+  s.steps.resize(order.size());
+  std::vector<bool> started(static_cast<size_t>(feed.robots()), false);
+  for (size_t i = 0; i < order.size(); ++i) {
+    const int r = feed.robotOf(order[i]);
     s.steps[i].robot = r + robotOffset;
     s.steps[i].id = order[i];
     s.steps[i].first = !started[static_cast<size_t>(r)];
     started[static_cast<size_t>(r)] = true;
   }
   for (const auto& e : ds.edges) {
-    const bool landmarkEdge = e.type == io::EdgeType::PosePoint2 || e.type == io::EdgeType::PosePoint3 ||
-                              e.type == io::EdgeType::BearingRange2;
-    auto a = rank.find(e.from);
-    auto b = landmarkEdge ? a : rank.find(e.to);
-    if (a == rank.end() || b == rank.end()) continue;
-    const int ra = robotOf[e.from] + robotOffset;
-    loopd::factor_t f = tools::edgeFactor(e, ra, landmarkEdge ? ra : robotOf[e.to] + robotOffset);
-    s.steps[std::max(a->second, b->second)].factors.push_back(std::move(f));
+    const long at = feed.dueAt(e);
+    if (at >= 0) s.steps[static_cast<size_t>(at)].factors.push_back(feed.factor(e, robotOffset));
   }
   return s;
 }

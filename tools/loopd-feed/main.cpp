@@ -21,7 +21,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <map>
 #include <memory>
 #include <string>
 #include <thread>
@@ -30,7 +29,7 @@
 #include "client/factor_publisher.h"
 #include "solvers/io/dataset_reader.h"
 #include "tools/common/cli.h"
-#include "tools/common/edge_factor.h"
+#include "tools/common/feed_order.h"
 
 using namespace loopd;
 using client::KeyRef;
@@ -100,49 +99,21 @@ std::int8_t ambiguousMode(const std::vector<loopd::factor_t>& alternatives, int 
 
 int run(const Options& o) {
   io::Dataset ds = io::readDataset(o.dataset);
-  std::vector<std::int64_t> ids;
-  for (const auto& v : ds.poses) ids.push_back(v.id);
-  std::sort(ids.begin(), ids.end());
-  if (o.poses >= 0 && static_cast<size_t>(o.poses) < ids.size()) ids.resize(static_cast<size_t>(o.poses));
-  if (ids.empty()) throw std::runtime_error("no poses in " + o.dataset);
-  const size_t n = ids.size();
-  const size_t robots = std::min<size_t>(static_cast<size_t>(o.robots), n);
-  // Robot of each pose: consecutive segments of the sorted ids.
-  std::map<std::int64_t, int> robotOf;
-  std::vector<std::vector<std::int64_t>> segment(robots);
-  for (size_t i = 0; i < n; ++i) {
-    const int r = static_cast<int>(i * robots / n);
-    robotOf[ids[i]] = r;
-    segment[static_cast<size_t>(r)].push_back(ids[i]);
-  }
-  // Order of appearance.
-  std::vector<std::int64_t> order;
-  if (!o.interleave) order = ids;
-  else
-    for (size_t k = 0; order.size() < n; ++k)
-      for (size_t r = 0; r < robots; ++r)
-        if (k < segment[r].size()) order.push_back(segment[r][k]);
-  std::map<std::int64_t, size_t> rank;
-  for (size_t i = 0; i < order.size(); ++i) rank[order[i]] = i;
+  const tools::FeedOrder feed(ds, o.poses, o.robots, o.interleave);
+  const std::vector<std::int64_t>& order = feed.poses();
+  const size_t n = order.size();
+  const size_t robots = static_cast<size_t>(feed.robots());
   // Each edge is due when its last pose appears; a HYPOTHESES group when the last pose of any
   // of its alternatives does.
   std::vector<std::vector<const io::Edge*>> due(n);
   std::vector<std::vector<const io::HypothesisGroup*>> dueGroups(n);
   size_t skipped = 0;
-  auto dueAt = [&](const io::Edge& e) -> long {
-    const bool landmarkEdge = e.type == io::EdgeType::PosePoint2 || e.type == io::EdgeType::PosePoint3 ||
-                              e.type == io::EdgeType::BearingRange2;
-    auto a = rank.find(e.from);
-    auto b = landmarkEdge ? a : rank.find(e.to);
-    if (a == rank.end() || b == rank.end()) return -1;
-    return static_cast<long>(std::max(a->second, b->second));
-  };
   std::vector<char> inGroup(ds.edges.size(), 0);
   for (const io::HypothesisGroup& g : ds.hypotheses) {
     long at = 0;
     for (int k = 0; k < g.count; ++k) {
       inGroup[static_cast<size_t>(g.firstEdge + k)] = 1;
-      const long d = dueAt(ds.edges[static_cast<size_t>(g.firstEdge + k)]);
+      const long d = feed.dueAt(ds.edges[static_cast<size_t>(g.firstEdge + k)]);
       at = (d < 0 || at < 0) ? -1 : std::max(at, d);
     }
     if (at < 0) skipped += static_cast<size_t>(g.count);
@@ -150,7 +121,7 @@ int run(const Options& o) {
   }
   for (const auto& e : ds.edges) {
     if (inGroup[static_cast<size_t>(e.index)]) continue;
-    const long at = dueAt(e);
+    const long at = feed.dueAt(e);
     if (at < 0) ++skipped;
     else due[static_cast<size_t>(at)].push_back(&e);
   }
@@ -187,29 +158,22 @@ int run(const Options& o) {
                                                              o.prefix + "FACTORS"));
   std::vector<bool> started(robots, false);
 
-  // One file edge as the wire's factor_t (id = its edge index), in its robots' frames.
-  auto toFactor = [&](const io::Edge& e) {
-    const bool between = e.type == io::EdgeType::BetweenSE2 || e.type == io::EdgeType::BetweenSE3;
-    return tools::edgeFactor(e, robotOf[e.from], between ? robotOf[e.to] : robotOf[e.from]);
-  };
-
-
   const auto t0 = std::chrono::steady_clock::now();
   const std::int64_t stepUs = o.rate > 0 ? static_cast<std::int64_t>(1e6 / o.rate) : 1000;
   for (size_t i = 0; i < n; ++i) {
     const std::int64_t id = order[i];
-    const int r = robotOf[id];
+    const int r = feed.robotOf(id);
     client::FactorPublisher& pub = *pubs[static_cast<size_t>(r)];
     if (!started[static_cast<size_t>(r)]) {
       started[static_cast<size_t>(r)] = true;
       if (ds.is3d) pub.initialValue(KeyRef::pose(r, id), client::Pose3{});
       else pub.initialValue(KeyRef::pose(r, id), client::Pose2{});
     }
-    for (const io::Edge* e : due[i]) pub.factor(toFactor(*e));
+    for (const io::Edge* e : due[i]) pub.factor(feed.factor(*e));
     for (const io::HypothesisGroup* g : dueGroups[i]) {
       std::vector<loopd::factor_t> alternatives;
       for (int k = 0; k < g->count; ++k) {
-        alternatives.push_back(toFactor(ds.edges[static_cast<size_t>(g->firstEdge + k)]));
+        alternatives.push_back(feed.factor(ds.edges[static_cast<size_t>(g->firstEdge + k)]));
         alternatives.back().id = 0;
         alternatives.back().role = loopd::factor_t::ROLE_LOOP_CLOSURE;
         if (alternatives.back().type != loopd::factor_t::BETWEEN_SE2 &&

@@ -1,0 +1,85 @@
+// tools/common/feed_order.h: which robot plays which pose, in which order, and when each edge
+// is due (what loopd-feed and the server benchmarks publish).
+#include <gtest/gtest.h>
+
+#include <stdexcept>
+#include <string>
+
+#include "tools/common/feed_order.h"
+
+namespace loopd::tools {
+namespace {
+
+// robot/kind/index, for comparing wire keys.
+std::string name(const loopd::key_t& k) {
+  return std::to_string(k.robot) + (k.kind == loopd::key_t::POSE ? " pose " : " landmark ") +
+         std::to_string(k.index);
+}
+
+// Poses 0..5 (listed out of order: the feed sorts by id), odometry along them, the loop
+// closure 4 -> 1 and a sighting of landmark 7 from pose 2.
+io::Dataset sixPoses() {
+  io::Dataset ds;
+  ds.path = "six.g2o";
+  for (std::int64_t id : {3, 0, 5, 1, 4, 2}) ds.poses.push_back({io::VertexType::SE2, id});
+  auto edge = [&](io::EdgeType t, std::int64_t from, std::int64_t to) {
+    io::Edge e;
+    e.type = t;
+    e.from = from;
+    e.to = to;
+    e.information.setIdentity();
+    e.index = static_cast<int>(ds.edges.size());
+    ds.edges.push_back(e);
+  };
+  for (int i = 0; i < 5; ++i) edge(io::EdgeType::BetweenSE2, i, i + 1);
+  edge(io::EdgeType::BetweenSE2, 4, 1);
+  edge(io::EdgeType::PosePoint2, 2, 7);
+  return ds;
+}
+
+TEST(FeedOrder, SegmentsOneAfterTheOtherOrRoundRobin) {
+  const io::Dataset ds = sixPoses();
+  const FeedOrder inTurn(ds, -1, 2, false);
+  EXPECT_EQ(inTurn.poses(), (std::vector<std::int64_t>{0, 1, 2, 3, 4, 5}));
+  const FeedOrder mixed(ds, -1, 2, true);
+  EXPECT_EQ(mixed.poses(), (std::vector<std::int64_t>{0, 3, 1, 4, 2, 5}));
+  EXPECT_EQ(mixed.robots(), 2);
+  EXPECT_EQ(mixed.robotOf(2), 0);
+  EXPECT_EQ(mixed.robotOf(3), 1);
+  EXPECT_EQ(FeedOrder(ds, -1, 50, false).robots(), 6);  // never more robots than poses
+}
+
+TEST(FeedOrder, AnEdgeIsDueWithItsLastPose) {
+  const io::Dataset ds = sixPoses();
+  const FeedOrder mixed(ds, -1, 2, true);  // 0 3 1 4 2 5
+  EXPECT_EQ(mixed.dueAt(ds.edges[0]), 2);  // 0 -> 1
+  EXPECT_EQ(mixed.dueAt(ds.edges[2]), 4);  // 2 -> 3
+  EXPECT_EQ(mixed.dueAt(ds.edges[5]), 3);  // 4 -> 1
+  EXPECT_EQ(mixed.dueAt(ds.edges[6]), 4);  // sighting from 2: its landmark id is no pose
+  const FeedOrder firstFour(ds, 4, 1, false);
+  EXPECT_EQ(firstFour.dueAt(ds.edges[2]), 3);
+  EXPECT_EQ(firstFour.dueAt(ds.edges[3]), -1);  // 3 -> 4: pose 4 is not fed
+}
+
+TEST(FeedOrder, FactorsNameTheirRobotsFrames) {
+  const io::Dataset ds = sixPoses();
+  const FeedOrder inTurn(ds, -1, 2, false);  // robot 0: 0 1 2, robot 1: 3 4 5
+  const loopd::factor_t across = inTurn.factor(ds.edges[2], 10);
+  EXPECT_EQ(across.role, loopd::factor_t::ROLE_LOOP_CLOSURE);  // robot 10's 2 -> robot 11's 3
+  ASSERT_EQ(across.keys.size(), 2u);
+  EXPECT_EQ(name(across.keys[0]), "10 pose 2");
+  EXPECT_EQ(name(across.keys[1]), "11 pose 3");
+  EXPECT_EQ(inTurn.factor(ds.edges[3]).role, loopd::factor_t::ROLE_ODOMETRY);
+  const loopd::factor_t sighting = inTurn.factor(ds.edges[6]);
+  EXPECT_EQ(name(sighting.keys[1]), "0 landmark 7");
+}
+
+TEST(FeedOrder, AFileWithoutPosesIsRefused) {
+  io::Dataset empty;
+  empty.path = "empty.g2o";
+  EXPECT_THROW(FeedOrder(empty, -1, 1, false), std::runtime_error);
+  EXPECT_THROW(FeedOrder(sixPoses(), 0, 1, false), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace loopd::tools

@@ -1,0 +1,53 @@
+#include "tools/common/feed_order.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include "tools/common/edge_factor.h"
+
+namespace loopd::tools {
+namespace {
+
+bool isBetween(const io::Edge& e) {
+  return e.type == io::EdgeType::BetweenSE2 || e.type == io::EdgeType::BetweenSE3;
+}
+
+}  // namespace
+
+FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool interleave) {
+  std::vector<std::int64_t> ids;
+  for (const auto& v : ds.poses) ids.push_back(v.id);
+  std::sort(ids.begin(), ids.end());
+  if (poses >= 0 && static_cast<size_t>(poses) < ids.size()) ids.resize(static_cast<size_t>(poses));
+  if (ids.empty()) throw std::runtime_error("no poses in " + ds.path);
+  const size_t n = ids.size();
+  const size_t robots = std::min<size_t>(static_cast<size_t>(std::max(1, robotsWanted)), n);
+  robots_ = static_cast<int>(robots);
+  std::vector<std::vector<std::int64_t>> segment(robots);
+  for (size_t i = 0; i < n; ++i) {
+    const int r = static_cast<int>(i * robots / n);
+    robotOf_[ids[i]] = r;
+    segment[static_cast<size_t>(r)].push_back(ids[i]);
+  }
+  if (!interleave)
+    order_ = ids;
+  else
+    for (size_t k = 0; order_.size() < n; ++k)
+      for (size_t r = 0; r < robots; ++r)
+        if (k < segment[r].size()) order_.push_back(segment[r][k]);
+  for (size_t i = 0; i < order_.size(); ++i) rank_[order_[i]] = static_cast<long>(i);
+}
+
+long FeedOrder::dueAt(const io::Edge& e) const {
+  const auto a = rank_.find(e.from);
+  const auto b = isBetween(e) ? rank_.find(e.to) : a;
+  if (a == rank_.end() || b == rank_.end()) return -1;
+  return std::max(a->second, b->second);
+}
+
+loopd::factor_t FeedOrder::factor(const io::Edge& e, int robotOffset) const {
+  const int from = robotOf(e.from);
+  return edgeFactor(e, from + robotOffset, (isBetween(e) ? robotOf(e.to) : from) + robotOffset);
+}
+
+}  // namespace loopd::tools

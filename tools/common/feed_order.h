@@ -1,0 +1,38 @@
+#pragma once
+// The order in which a dataset's poses are played to a server (loopd-feed, the server
+// benchmarks): by id, optionally only the first N; cut into consecutive segments, one robot
+// each; one segment after the other or round-robin over the robots. An edge is due at the
+// step its last pose appears.
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+#include "loopd/factor_t.hpp"
+#include "solvers/io/dataset.h"
+
+namespace loopd::tools {
+
+class FeedOrder {
+ public:
+  /// Throws std::runtime_error when the file has no poses. `poses` < 0 feeds them all;
+  /// `robots` is capped at the number of poses fed.
+  FeedOrder(const io::Dataset& ds, long poses, int robots, bool interleave);
+
+  const std::vector<std::int64_t>& poses() const { return order_; }  // ids, in feed order
+  int robots() const { return robots_; }
+  /// 0-based robot of a fed pose.
+  int robotOf(std::int64_t pose) const { return robotOf_.at(pose); }
+  /// The step (index into poses()) an edge is due at: its last end's, a sighting's pose's;
+  /// -1 when an end is not fed.
+  long dueAt(const io::Edge& e) const;
+  /// The edge as the wire's factor_t in its robots' frames, robot ids + robotOffset.
+  loopd::factor_t factor(const io::Edge& e, int robotOffset = 0) const;
+
+ private:
+  std::vector<std::int64_t> order_;
+  int robots_ = 1;
+  std::unordered_map<std::int64_t, int> robotOf_;
+  std::unordered_map<std::int64_t, long> rank_;
+};
+
+}  // namespace loopd::tools
