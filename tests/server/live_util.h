@@ -120,6 +120,15 @@ struct Proc {
     s << std::ifstream(log).rdbuf();
     return s.str();
   }
+  /// Waits until the log holds `text` (a slow start, as under the sanitizers, takes seconds).
+  bool waitForOutput(const std::string& text, double seconds) const {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    while (output().find(text) == std::string::npos) {
+      if (std::chrono::steady_clock::now() > end) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return true;
+  }
   ~Proc() {
     if (pid > 0) kill(SIGKILL);
   }
