@@ -22,6 +22,8 @@ enum class EdgeType {
 
 /// Dimension of a vertex's value as stored (SE3 stores x y z qx qy qz qw).
 int vertexValueSize(VertexType t);
+/// A pose-to-pose edge (odometry or loop closure), as opposed to a landmark sighting.
+inline bool isBetween(EdgeType t) { return t == EdgeType::BetweenSE2 || t == EdgeType::BetweenSE3; }
 /// Dimension of an edge's residual (and of its information matrix).
 int edgeDimension(EdgeType t);
 /// Dimension of an edge's measurement as stored (SE3: 7).
@@ -29,9 +31,9 @@ int edgeMeasurementSize(EdgeType t);
 
 struct Vertex {
   VertexType type = VertexType::SE2;
-  std::int64_t id = 0;             // as in the file
-  std::array<double, 7> value{};   // first vertexValueSize(type) entries used
-  int line = 0;                    // 1-based line in the file; 0 when synthesised
+  std::int64_t id = 0;            // as in the file
+  std::array<double, 7> value{};  // first vertexValueSize(type) entries used
+  int line = 0;                   // 1-based line in the file; 0 when synthesised
   bool isLandmark() const { return type == VertexType::Point2 || type == VertexType::Point3; }
 };
 
@@ -40,8 +42,9 @@ struct Edge {
   std::int64_t from = 0;  // a pose id
   std::int64_t to = 0;    // a pose id, or a landmark id for PosePoint*/BearingRange2
   std::array<double, 7> measurement{};
-  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();  // full
-                                                       // symmetric, top-left dim×dim used
+  Eigen::Matrix<double, 6, 6> information =
+      Eigen::Matrix<double, 6, 6>::Zero();  // full
+                                            // symmetric, top-left dim×dim used
   int line = 0;
   /// The 0-based index of this edge among the file's edges (the `rejected` numbering).
   int index = 0;
@@ -53,14 +56,14 @@ struct HypothesisGroup {
   int firstEdge = 0;  // index of the first alternative in Dataset::edges
   int count = 0;      // k: the alternatives are edges firstEdge … firstEdge + k − 1
   bool null = false;
-  int line = 0;       // the HYPOTHESES line
+  int line = 0;  // the HYPOTHESES line
 };
 
 struct Dataset {
   std::string path;
-  std::string format;        // "g2o", "toro", "victoria"
+  std::string format;  // "g2o", "toro", "victoria"
   bool is3d = false;
-  bool hadVertices = false;  // false: poses were composed from odometry
+  bool hadVertices = false;       // false: poses were composed from odometry
   std::vector<Vertex> poses;      // SE2 or SE3, file order
   std::vector<Vertex> landmarks;  // Point2 or Point3, file order
   std::vector<Edge> edges;        // file order

@@ -8,7 +8,6 @@ namespace {
 
 bool is3dVertex(VertexType t) { return t == VertexType::SE3 || t == VertexType::Point3; }
 bool is3dEdge(EdgeType t) { return t == EdgeType::BetweenSE3 || t == EdgeType::PosePoint3; }
-bool isBetween(EdgeType t) { return t == EdgeType::BetweenSE2 || t == EdgeType::BetweenSE3; }
 
 std::string edgeName(const Edge& e) {
   return "edge " + std::to_string(e.from) + " -> " + std::to_string(e.to);

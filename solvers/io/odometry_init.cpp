@@ -14,8 +14,6 @@ namespace loopd::io::detail {
 
 namespace {
 
-bool isBetween(EdgeType t) { return t == EdgeType::BetweenSE2 || t == EdgeType::BetweenSE3; }
-
 // What differs between 2D and 3D: reading a measurement, writing a pose or a landmark.
 template <class Pose>
 struct Geometry;

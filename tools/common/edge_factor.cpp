@@ -16,7 +16,7 @@ loopd::factor_t edgeFactor(const io::Edge& e, int ra, int rb) {
   f.measurement.assign(e.measurement.begin(), e.measurement.begin() + io::edgeMeasurementSize(e.type));
   f.num_measurement = static_cast<std::int16_t>(f.measurement.size());
   f.robust = "";
-  if (e.type == io::EdgeType::BetweenSE2 || e.type == io::EdgeType::BetweenSE3) {
+  if (io::isBetween(e.type)) {
     f.type = e.type == io::EdgeType::BetweenSE2 ? loopd::factor_t::BETWEEN_SE2 : loopd::factor_t::BETWEEN_SE3;
     const bool consecutive = ra == rb && (e.to == e.from + 1 || e.from == e.to + 1);
     f.role = consecutive ? loopd::factor_t::ROLE_ODOMETRY : loopd::factor_t::ROLE_LOOP_CLOSURE;

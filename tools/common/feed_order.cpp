@@ -6,13 +6,6 @@
 #include "tools/common/edge_factor.h"
 
 namespace loopd::tools {
-namespace {
-
-bool isBetween(const io::Edge& e) {
-  return e.type == io::EdgeType::BetweenSE2 || e.type == io::EdgeType::BetweenSE3;
-}
-
-}  // namespace
 
 FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool interleave) {
   std::vector<std::int64_t> ids;
@@ -40,14 +33,15 @@ FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool i
 
 long FeedOrder::dueAt(const io::Edge& e) const {
   const auto a = rank_.find(e.from);
-  const auto b = isBetween(e) ? rank_.find(e.to) : a;
+  const auto b = io::isBetween(e.type) ? rank_.find(e.to) : a;
   if (a == rank_.end() || b == rank_.end()) return -1;
   return std::max(a->second, b->second);
 }
 
 loopd::factor_t FeedOrder::factor(const io::Edge& e, int robotOffset) const {
   const int from = robotOf(e.from);
-  return edgeFactor(e, from + robotOffset, (isBetween(e) ? robotOf(e.to) : from) + robotOffset);
+  return edgeFactor(e, from + robotOffset,
+                    (io::isBetween(e.type) ? robotOf(e.to) : from) + robotOffset);
 }
 
 }  // namespace loopd::tools

@@ -34,9 +34,7 @@ class Rng {
   std::mt19937_64 g_;
 };
 
-inline bool isBetween(const io::Edge& e) {
-  return e.type == io::EdgeType::BetweenSE2 || e.type == io::EdgeType::BetweenSE3;
-}
+inline bool isBetween(const io::Edge& e) { return io::isBetween(e.type); }
 inline bool isLoop(const io::Edge& e) { return isBetween(e) && std::llabs(e.to - e.from) != 1; }
 
 inline double translationNorm(const io::Edge& e) {
