@@ -80,6 +80,8 @@ TEST(LoopdFeed, BadCommandLines) {
   EXPECT_EQ(runTool({kFeed, kData + "/intel.g2o", "--robots", "0"}, tmp("f.log")), 2);
   EXPECT_EQ(runTool({kFeed, "/nonexistent.g2o", "--log", tmp("x.lcmlog")}, tmp("f.log")), 1);
   EXPECT_EQ(runTool({kListen}, tmp("l.log")), 2);
+  EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-batches", "0"}, tmp("l.log")), 2);
+  EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-batches", "many"}, tmp("l.log")), 2);
 }
 
 TEST(LoopdListen, WritesEstimateAndCovariancesThenExitsWhenQuiet) {
@@ -113,6 +115,31 @@ TEST(LoopdListen, WritesEstimateAndCovariancesThenExitsWhenQuiet) {
   std::ifstream e(est);
   std::getline(e, line);
   EXPECT_EQ(line.rfind("VERTEX_SE2 0 ", 0), 0u) << line;
+}
+
+TEST(LoopdListen, UntilBatchesEndsOnTheServersConvergedStatus) {
+  const std::string url = uniqueUrl();
+  // A long idle pause: the listener must wait for the idle optimize, however quiet it gets.
+  Proc srv = Proc::start({kLoopd, "--lcm-url", url, "--idle-seconds", "2"}, tmp("srv.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  const std::string est = tmp("est.g2o");
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-batches", "300"},
+                            tmp("listen.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  const std::string intel = kData + "/intel.g2o";
+  ASSERT_EQ(runTool({kFeed, intel, "--poses", "200", "--lcm-url", url, "--quiet"}, tmp("f1.log")), 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int>(3000 * kSlowdown)));
+  EXPECT_TRUE(listen.alive()) << "200 of 300 batches: it must still wait. " << listen.output();
+  // The same 200 again (resends do not count) and 100 more.
+  ASSERT_EQ(runTool({kFeed, intel, "--poses", "300", "--lcm-url", url, "--quiet"}, tmp("f2.log")), 0);
+  ASSERT_EQ(listen.wait(60 * kSlowdown), 0) << listen.output();
+  srv.kill(SIGINT);
+  EXPECT_EQ(srv.wait(20), 0);
+  const std::string lo = listen.output();
+  EXPECT_NE(lo.find("300 batches accepted, 200 duplicate"), std::string::npos) << lo;
+  EXPECT_EQ(readVertices(est).size(), 300u);
+  // The status it ended on was the idle optimize's (2 s after the last input), not an update's.
+  EXPECT_NE(lo.find(" converged, chi2"), std::string::npos) << lo;
 }
 
 // An intel with 15 ambiguous loop closures (wrong targets: one measurement, other keys).

@@ -2,20 +2,25 @@
 // tools read.
 //
 //   loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o [--covariances COV.txt]
-//                [--until-quiet SECONDS] [--quiet]
+//                [--until-quiet SECONDS] [--until-batches N] [--quiet]
 //
 // EST.g2o: one VERTEX_SE2 / VERTEX_SE3:QUAT line per pose (id = pose index, the value as
 // published: in the common frame once its robot is joined), then VERTEX_XY / VERTEX_TRACKXYZ
 // per landmark. COV.txt: the latest-pose covariances the server published, one line per pose
 // (`POSE id` then the upper triangle, loopd-solve's format). Without --until-quiet it records
 // until SIGINT/SIGTERM; with it, it exits once no new estimate arrived for that long (status
-// heartbeats do not count; the wait starts with the first estimate). At start it asks the
-// server for a full snapshot (REQUEST_ESTIMATE), so it may join a running server.
+// heartbeats do not count; the wait starts with the first estimate). With --until-batches it
+// exits once the server's status says it has handled N distinct batches (accepted, rejected or
+// expired; resends do not count), holds and queues none, and its estimate is converged: an end
+// that does not depend on the server's speed (one long update can outlast any quiet time).
+// At start it asks the server for a full snapshot (REQUEST_ESTIMATE), so it may join a running
+// server; before it exits it asks for one more (repairs any chunk udpm lost).
 #include <lcm/lcm-cpp.hpp>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <map>
@@ -35,13 +40,14 @@ extern "C" void onSignal(int) { g_stop = true; }
 
 const char* kUsage =
     "usage: loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o [--covariances COV.txt]\n"
-    "                    [--until-quiet SECONDS] [--quiet]\n";
+    "                    [--until-quiet SECONDS] [--until-batches N] [--quiet]\n";
 
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string url, prefix = "LOOPD_", out, cov;
   double quietSeconds = -1.0;
+  long long untilBatches = -1;
   bool quiet = false;
   try {
     for (int i = 1; i < argc; ++i) {
@@ -55,10 +61,13 @@ int main(int argc, char** argv) {
       else if (a == "--out") out = val();
       else if (a == "--covariances") cov = val();
       else if (a == "--until-quiet") quietSeconds = std::stod(val());
+      else if (a == "--until-batches") untilBatches = std::stoll(val());
       else if (a == "--quiet") quiet = true;
       else throw std::invalid_argument("unknown argument " + a);
     }
     if (out.empty()) throw std::invalid_argument("--out is required");
+    if (!std::isfinite(quietSeconds)) throw std::invalid_argument("--until-quiet must be a finite number of seconds");
+    if (untilBatches == 0 || untilBatches < -1) throw std::invalid_argument("--until-batches must be positive");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "loopd-listen: %s\n\n%s", e.what(), kUsage);
     return 2;
@@ -79,6 +88,14 @@ int main(int argc, char** argv) {
   sub.onEstimate([&](const client::RobotEstimate&, const loopd::estimate_t&) {
     lastEstimate = Clock::now();
     any = true;
+  });
+  // The server has handled every batch expected and published the optimum of its graph.
+  bool done = false;
+  sub.onStatus([&](const loopd::status_t& st) {
+    // Duplicates do not count: a resend of a handled batch is not a new one.
+    const long long handled = st.batches_accepted + st.batches_rejected + st.batches_expired;
+    if (untilBatches > 0 && handled >= untilBatches && st.converged && st.queue_depth == 0 && st.batches_held == 0)
+      done = true;
   });
   sub.onCovariance([&](const loopd::covariance_t& m) {
     if (m.joint) return;
@@ -102,12 +119,14 @@ int main(int argc, char** argv) {
   lcm.publish(prefix + "COMMAND", &req);
 
   bool finalRequested = false;
+  auto quietFor = [&] { return std::chrono::duration<double>(Clock::now() - lastEstimate).count(); };
   while (!g_stop) {
     lcm.handleTimeout(100);
-    const double wait = finalRequested ? std::min(quietSeconds, 1.0) : quietSeconds;
-    if (quietSeconds >= 0 && any && std::chrono::duration<double>(Clock::now() - lastEstimate).count() >= wait) {
-      if (finalRequested) break;
-      // Quiet: ask for one full snapshot (repairs any chunk udpm lost), then stop after it.
+    if (finalRequested) {
+      // The last snapshot is in once its estimates stop.
+      if (quietFor() >= (quietSeconds >= 0 ? std::min(quietSeconds, 1.0) : 1.0)) break;
+    } else if (done || (quietSeconds >= 0 && any && quietFor() >= quietSeconds)) {
+      // Ask for one full snapshot (repairs any chunk udpm lost), then stop after it.
       finalRequested = true;
       req.request_id = 2;
       lcm.publish(prefix + "COMMAND", &req);
@@ -161,10 +180,10 @@ int main(int argc, char** argv) {
     int common = 0;
     for (const auto& [r, t] : sub.all()) common += t.commonFrame ? 1 : 0;
     std::fprintf(stderr, "loopd-listen: %zu poses, %zu landmarks written to %s (%lld estimate messages, %zu robots, "
-                         "%d in a common frame; server %s, chi2 %.12g, %lld batches accepted, %lld duplicate, "
+                         "%d in a common frame; server %s%s, chi2 %.12g, %lld batches accepted, %lld duplicate, "
                          "%lld rejected)\n",
                  ds.poses.size(), ds.landmarks.size(), out.c_str(), static_cast<long long>(sub.estimatesReceived()),
-                 sub.all().size(), common, st.solver.c_str(), st.chi2, static_cast<long long>(st.batches_accepted),
+                 sub.all().size(), common, st.solver.c_str(), st.converged ? " converged" : "", st.chi2, static_cast<long long>(st.batches_accepted),
                  static_cast<long long>(st.batches_duplicate), static_cast<long long>(st.batches_rejected));
   }
   return 0;
