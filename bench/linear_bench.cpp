@@ -97,10 +97,11 @@ int main(int argc, char** argv) {
       sBlock = std::min(sBlock, timeMs([&] { block.solve(b.data(), xb.data()); }));
     }
     const double best = std::min(tAuto, tSuper);
-    std::printf("%-16s %7d %9ld %10.3g | %9.3f %9.3f %9.3f %6.2f | %7.3f %7.3f %7.2f | %8.2f %9.1e%s\n",
-                name.c_str(), n, block.factorNonZeros(), block.flops(), tAuto, tSuper, tBlock,
-                best / tBlock, sAuto, sBlock, sAuto / sBlock, block.flops() / (tBlock * 1e6),
-                relDiff(xb, xc), ok ? "" : "  (factorization FAILED)");
+    std::printf(
+        "%-16s %7d %9ld %10.3g | %9.3f %9.3f %9.3f %6.2f | %7.3f %7.3f %7.2f | %8.2f %9.1e%s\n",
+        name.c_str(), n, block.factorNonZeros(), block.flops(), tAuto, tSuper, tBlock,
+        best / tBlock, sAuto, sBlock, sAuto / sBlock, block.flops() / (tBlock * 1e6),
+        relDiff(xb, xc), ok ? "" : "  (factorization FAILED)");
     std::fflush(stdout);
   }
   return 0;

@@ -49,20 +49,30 @@ Options parse(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&] { return loopd::tools::flagValue(argc, argv, i); };
-    if (a == "--poses") o.poses = std::stol(next());
-    else if (a == "--out") o.out = next();
-    else if (a == "--seed") o.seed = static_cast<unsigned>(std::stoul(next()));
-    else if (a == "--closure-prob") o.closureProb = std::stod(next());
-    else if (a == "--min-gap") o.minGap = std::stol(next());
-    else if (a == "--world") o.world = next();
-    else if (a == "--window") o.window = std::stol(next());
-    else if (a == "--advance") o.advance = std::stol(next());
-    else throw std::invalid_argument("unknown option " + a);
+    if (a == "--poses")
+      o.poses = std::stol(next());
+    else if (a == "--out")
+      o.out = next();
+    else if (a == "--seed")
+      o.seed = static_cast<unsigned>(std::stoul(next()));
+    else if (a == "--closure-prob")
+      o.closureProb = std::stod(next());
+    else if (a == "--min-gap")
+      o.minGap = std::stol(next());
+    else if (a == "--world")
+      o.world = next();
+    else if (a == "--window")
+      o.window = std::stol(next());
+    else if (a == "--advance")
+      o.advance = std::stol(next());
+    else
+      throw std::invalid_argument("unknown option " + a);
   }
   if (o.out.empty() || o.poses < 2) throw std::invalid_argument("need --poses N>=2 and --out");
   if (o.world != "city" && o.world != "square")
     throw std::invalid_argument("--world is city or square");
-  if (o.window < 2 || o.advance < 1) throw std::invalid_argument("need --window >= 2, --advance >= 1");
+  if (o.window < 2 || o.advance < 1)
+    throw std::invalid_argument("need --window >= 2, --advance >= 1");
   return o;
 }
 
@@ -73,10 +83,11 @@ int main(int argc, char** argv) {
   try {
     o = parse(argc, argv);
   } catch (const std::exception& e) {
-    std::fprintf(stderr,
-                 "loopd-synth: %s\nusage: loopd-synth --poses N --out world.g2o [--seed S] "
-                 "[--world city|square] [--closure-prob P] [--min-gap G] [--window H] [--advance K]\n",
-                 e.what());
+    std::fprintf(
+        stderr,
+        "loopd-synth: %s\nusage: loopd-synth --poses N --out world.g2o [--seed S] "
+        "[--world city|square] [--closure-prob P] [--min-gap G] [--window H] [--advance K]\n",
+        e.what());
     return 2;
   }
   std::mt19937_64 rng(o.seed);
@@ -92,12 +103,16 @@ int main(int argc, char** argv) {
   // ~√N for the square world (revisits keep happening at every size), or the neighbourhood
   // around a centre that moves east for the city world.
   const bool city = o.world == "city";
-  const long half = city ? o.window
-                         : std::max<long>(5, static_cast<long>(std::sqrt(static_cast<double>(o.poses)) / 2));
+  const long half =
+      city ? o.window
+           : std::max<long>(5, static_cast<long>(std::sqrt(static_cast<double>(o.poses)) / 2));
   std::vector<SE2> truth{SE2()};
   std::vector<std::pair<long, long>> cell{{0, 0}};
   std::map<std::pair<long, long>, long> lastVisit{{{0, 0}, 0}};
-  struct Edge { long a, b; SE2 z; };
+  struct Edge {
+    long a, b;
+    SE2 z;
+  };
   std::vector<Edge> edges;
   std::vector<SE2> estimate{SE2()};
   int heading = 0;  // 0 +x, 1 +y, 2 −x, 3 −y
@@ -106,7 +121,9 @@ int main(int argc, char** argv) {
     int turn = r < 0.15 ? 1 : (r < 0.3 ? -1 : 0);
     auto [cx, cy] = cell.back();
     const long centre = city ? k / o.advance : 0;
-    auto inside = [&](long x, long y) { return std::labs(x - centre) <= half && std::labs(y) <= half; };
+    auto inside = [&](long x, long y) {
+      return std::labs(x - centre) <= half && std::labs(y) <= half;
+    };
     bool found = false;
     for (int attempt = 0; attempt < 4; ++attempt) {
       const int h = (heading + turn + 4) % 4;

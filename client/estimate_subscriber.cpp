@@ -26,8 +26,8 @@ EstimateSubscriber::~EstimateSubscriber() {
   for (void* s : subscriptions_) lcm_.unsubscribe(static_cast<lcm::Subscription*>(s));
 }
 
-void EstimateSubscriber::estimateMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::estimate_t* m,
-                                     EstimateSubscriber* self) {
+void EstimateSubscriber::estimateMsg(const lcm::ReceiveBuffer*, const std::string&,
+                                     const loopd::estimate_t* m, EstimateSubscriber* self) {
   self->handleEstimate(*m);
 }
 
@@ -44,9 +44,11 @@ void EstimateSubscriber::handleEstimate(const loopd::estimate_t& m) {
       t.commonFrame = m.common_frame;
       t.se3 = m.pose_type == loopd::estimate_t::SE3;
       t.updateSeq = m.update_seq;
-      for (int i = 0; i < m.num_poses; ++i) t.poses[m.pose_indices[static_cast<size_t>(i)]] = m.poses[static_cast<size_t>(i)];
+      for (int i = 0; i < m.num_poses; ++i)
+        t.poses[m.pose_indices[static_cast<size_t>(i)]] = m.poses[static_cast<size_t>(i)];
       for (int i = 0; i < m.num_landmarks; ++i)
-        t.landmarks[m.landmark_indices[static_cast<size_t>(i)]] = m.landmarks[static_cast<size_t>(i)];
+        t.landmarks[m.landmark_indices[static_cast<size_t>(i)]] =
+            m.landmarks[static_cast<size_t>(i)];
     };
     if (!m.full_snapshot) {
       fill(robots_[m.robot]);
@@ -63,7 +65,8 @@ void EstimateSubscriber::handleEstimate(const loopd::estimate_t& m) {
       if (++p.received >= p.count) {
         // A complete snapshot replaces the table, unless deltas of a later update arrived.
         RobotEstimate& cur = robots_[m.robot];
-        if (cur.updateSeq <= p.updateSeq) cur = p.table;
+        if (cur.updateSeq <= p.updateSeq)
+          cur = p.table;
         else
           for (const auto& [i, v] : p.table.poses) cur.poses.emplace(i, v);
         snapshots_.erase(m.robot);
@@ -75,8 +78,8 @@ void EstimateSubscriber::handleEstimate(const loopd::estimate_t& m) {
   if (changed && onEstimate_) onEstimate_(copy, m);
 }
 
-void EstimateSubscriber::covarianceMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::covariance_t* m,
-                                       EstimateSubscriber* self) {
+void EstimateSubscriber::covarianceMsg(const lcm::ReceiveBuffer*, const std::string&,
+                                       const loopd::covariance_t* m, EstimateSubscriber* self) {
   {
     std::lock_guard<std::mutex> l(self->mu_);
     if (m->request_id == 0 && !m->joint) {
@@ -85,8 +88,9 @@ void EstimateSubscriber::covarianceMsg(const lcm::ReceiveBuffer*, const std::str
         const size_t d = static_cast<size_t>(m->dims[static_cast<size_t>(i)]);
         if (off + d * d > m->values.size()) break;
         const auto& k = m->keys[static_cast<size_t>(i)];
-        self->covariances_[k.robot] = {k.index, std::vector<double>(m->values.begin() + static_cast<long>(off),
-                                                                    m->values.begin() + static_cast<long>(off + d * d))};
+        self->covariances_[k.robot] = {
+            k.index, std::vector<double>(m->values.begin() + static_cast<long>(off),
+                                         m->values.begin() + static_cast<long>(off + d * d))};
         off += d * d;
       }
     }
@@ -94,8 +98,8 @@ void EstimateSubscriber::covarianceMsg(const lcm::ReceiveBuffer*, const std::str
   if (self->onCovariance_) self->onCovariance_(*m);
 }
 
-void EstimateSubscriber::statusMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::status_t* m,
-                                   EstimateSubscriber* self) {
+void EstimateSubscriber::statusMsg(const lcm::ReceiveBuffer*, const std::string&,
+                                   const loopd::status_t* m, EstimateSubscriber* self) {
   {
     std::lock_guard<std::mutex> l(self->mu_);
     self->status_ = *m;
@@ -103,8 +107,8 @@ void EstimateSubscriber::statusMsg(const lcm::ReceiveBuffer*, const std::string&
   if (self->onStatus_) self->onStatus_(*m);
 }
 
-void EstimateSubscriber::errorMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::error_t* m,
-                                  EstimateSubscriber* self) {
+void EstimateSubscriber::errorMsg(const lcm::ReceiveBuffer*, const std::string&,
+                                  const loopd::error_t* m, EstimateSubscriber* self) {
   {
     std::lock_guard<std::mutex> l(self->mu_);
     ++self->errorCount_;
@@ -128,7 +132,8 @@ std::map<std::int32_t, RobotEstimate> EstimateSubscriber::all() const {
   std::lock_guard<std::mutex> l(mu_);
   return robots_;
 }
-std::map<std::int32_t, std::pair<std::int64_t, std::vector<double>>> EstimateSubscriber::latestCovariances() const {
+std::map<std::int32_t, std::pair<std::int64_t, std::vector<double>>>
+EstimateSubscriber::latestCovariances() const {
   std::lock_guard<std::mutex> l(mu_);
   return covariances_;
 }

@@ -18,7 +18,7 @@
 namespace lcm {
 class LCM;
 class ReceiveBuffer;
-}
+}  // namespace lcm
 
 namespace loopd::client {
 
@@ -53,16 +53,24 @@ class EstimateSubscriber {
   std::vector<loopd::error_t> errors() const;
 
   /// Called after a robot's table changed (a delta chunk or a complete snapshot).
-  void onEstimate(std::function<void(const RobotEstimate&, const loopd::estimate_t&)> cb) { onEstimate_ = std::move(cb); }
-  void onCovariance(std::function<void(const loopd::covariance_t&)> cb) { onCovariance_ = std::move(cb); }
+  void onEstimate(std::function<void(const RobotEstimate&, const loopd::estimate_t&)> cb) {
+    onEstimate_ = std::move(cb);
+  }
+  void onCovariance(std::function<void(const loopd::covariance_t&)> cb) {
+    onCovariance_ = std::move(cb);
+  }
   void onStatus(std::function<void(const loopd::status_t&)> cb) { onStatus_ = std::move(cb); }
   void onError(std::function<void(const loopd::error_t&)> cb) { onError_ = std::move(cb); }
 
  private:
-  static void estimateMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::estimate_t* m, EstimateSubscriber* self);
-  static void covarianceMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::covariance_t* m, EstimateSubscriber* self);
-  static void statusMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::status_t* m, EstimateSubscriber* self);
-  static void errorMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::error_t* m, EstimateSubscriber* self);
+  static void estimateMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::estimate_t* m,
+                          EstimateSubscriber* self);
+  static void covarianceMsg(const lcm::ReceiveBuffer*, const std::string&,
+                            const loopd::covariance_t* m, EstimateSubscriber* self);
+  static void statusMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::status_t* m,
+                        EstimateSubscriber* self);
+  static void errorMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::error_t* m,
+                       EstimateSubscriber* self);
   void handleEstimate(const loopd::estimate_t& m);
 
   lcm::LCM& lcm_;

@@ -1,8 +1,8 @@
 #include "client/factor_publisher.h"
 
-#include <lcm/lcm-cpp.hpp>
 #include <chrono>
 #include <cmath>
+#include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
 
 namespace loopd::client {
@@ -40,7 +40,8 @@ FactorPublisher::FactorPublisher(lcm::LCM& lcm, std::string sender, std::string 
 
 FactorPublisher::FactorPublisher(BatchSink sink, std::string sender, std::string channel)
     : sink_(std::move(sink)), sender_(std::move(sender)), channel_(std::move(channel)) {
-  if (sender_.empty() || sender_.size() > 63) throw std::invalid_argument("sender must have 1..63 characters");
+  if (sender_.empty() || sender_.size() > 63)
+    throw std::invalid_argument("sender must have 1..63 characters");
 }
 
 std::int64_t FactorPublisher::takeId(std::int64_t id) {
@@ -77,7 +78,8 @@ loopd::factor_t plain(std::int8_t type, std::int8_t role, std::vector<KeyRef> ke
 
 loopd::factor_t FactorPublisher::make(std::int8_t type, std::int8_t role, std::vector<KeyRef> keys,
                                       std::vector<double> measurement, const double* info, int dim,
-                                      std::int64_t id, const std::string& robust, double robustParam) {
+                                      std::int64_t id, const std::string& robust,
+                                      double robustParam) {
   loopd::factor_t f = plain(type, role, std::move(keys), std::move(measurement), info, dim);
   f.id = id;
   f.robust = robust;
@@ -95,43 +97,53 @@ std::int64_t FactorPublisher::factor(loopd::factor_t f) {
 }
 
 std::int64_t FactorPublisher::odometry(std::int32_t robot, std::int64_t from, std::int64_t to,
-                                       const Pose2& z, const Eigen::Matrix3d& info, std::int64_t id) {
-  return factor(make(F::BETWEEN_SE2, F::ROLE_ODOMETRY, {KeyRef::pose(robot, from), KeyRef::pose(robot, to)},
-                     {z.x, z.y, z.theta}, info.data(), 3, id));
+                                       const Pose2& z, const Eigen::Matrix3d& info,
+                                       std::int64_t id) {
+  return factor(make(F::BETWEEN_SE2, F::ROLE_ODOMETRY,
+                     {KeyRef::pose(robot, from), KeyRef::pose(robot, to)}, {z.x, z.y, z.theta},
+                     info.data(), 3, id));
 }
 std::int64_t FactorPublisher::odometry(std::int32_t robot, std::int64_t from, std::int64_t to,
                                        const Pose3& z, const Eigen::Matrix<double, 6, 6>& info,
                                        std::int64_t id) {
-  return factor(make(F::BETWEEN_SE3, F::ROLE_ODOMETRY, {KeyRef::pose(robot, from), KeyRef::pose(robot, to)},
-                     pose3(z), info.data(), 6, id));
+  return factor(make(F::BETWEEN_SE3, F::ROLE_ODOMETRY,
+                     {KeyRef::pose(robot, from), KeyRef::pose(robot, to)}, pose3(z), info.data(), 6,
+                     id));
 }
-std::int64_t FactorPublisher::loopClosure(KeyRef a, KeyRef b, const Pose2& z, const Eigen::Matrix3d& info,
-                                          const std::string& robust, double param, std::int64_t id) {
-  return factor(make(F::BETWEEN_SE2, F::ROLE_LOOP_CLOSURE, {a, b}, {z.x, z.y, z.theta}, info.data(), 3,
-                     id, robust, param));
+std::int64_t FactorPublisher::loopClosure(KeyRef a, KeyRef b, const Pose2& z,
+                                          const Eigen::Matrix3d& info, const std::string& robust,
+                                          double param, std::int64_t id) {
+  return factor(make(F::BETWEEN_SE2, F::ROLE_LOOP_CLOSURE, {a, b}, {z.x, z.y, z.theta}, info.data(),
+                     3, id, robust, param));
 }
 std::int64_t FactorPublisher::loopClosure(KeyRef a, KeyRef b, const Pose3& z,
                                           const Eigen::Matrix<double, 6, 6>& info,
-                                          const std::string& robust, double param, std::int64_t id) {
-  return factor(make(F::BETWEEN_SE3, F::ROLE_LOOP_CLOSURE, {a, b}, pose3(z), info.data(), 6, id, robust, param));
+                                          const std::string& robust, double param,
+                                          std::int64_t id) {
+  return factor(make(F::BETWEEN_SE3, F::ROLE_LOOP_CLOSURE, {a, b}, pose3(z), info.data(), 6, id,
+                     robust, param));
 }
 std::int64_t FactorPublisher::landmark(KeyRef pose, KeyRef point, const Eigen::Vector2d& z,
                                        const Eigen::Matrix2d& info, std::int64_t id) {
-  return factor(make(F::POSE_POINT2, F::ROLE_LANDMARK, {pose, point}, {z.x(), z.y()}, info.data(), 2, id));
+  return factor(
+      make(F::POSE_POINT2, F::ROLE_LANDMARK, {pose, point}, {z.x(), z.y()}, info.data(), 2, id));
 }
 std::int64_t FactorPublisher::landmark(KeyRef pose, KeyRef point, const Eigen::Vector3d& z,
                                        const Eigen::Matrix3d& info, std::int64_t id) {
-  return factor(make(F::POSE_POINT3, F::ROLE_LANDMARK, {pose, point}, {z.x(), z.y(), z.z()}, info.data(), 3, id));
+  return factor(make(F::POSE_POINT3, F::ROLE_LANDMARK, {pose, point}, {z.x(), z.y(), z.z()},
+                     info.data(), 3, id));
 }
 std::int64_t FactorPublisher::bearingRange(KeyRef pose, KeyRef point, double bearing, double range,
                                            const Eigen::Matrix2d& info, std::int64_t id) {
-  return factor(make(F::BEARING_RANGE2, F::ROLE_LANDMARK, {pose, point}, {bearing, range}, info.data(), 2, id));
+  return factor(make(F::BEARING_RANGE2, F::ROLE_LANDMARK, {pose, point}, {bearing, range},
+                     info.data(), 2, id));
 }
-std::int64_t FactorPublisher::prior(KeyRef pose, const Pose2& z, const Eigen::Matrix3d& info, std::int64_t id) {
+std::int64_t FactorPublisher::prior(KeyRef pose, const Pose2& z, const Eigen::Matrix3d& info,
+                                    std::int64_t id) {
   return factor(make(F::PRIOR_SE2, F::ROLE_PRIOR, {pose}, {z.x, z.y, z.theta}, info.data(), 3, id));
 }
-std::int64_t FactorPublisher::prior(KeyRef pose, const Pose3& z, const Eigen::Matrix<double, 6, 6>& info,
-                                    std::int64_t id) {
+std::int64_t FactorPublisher::prior(KeyRef pose, const Pose3& z,
+                                    const Eigen::Matrix<double, 6, 6>& info, std::int64_t id) {
   return factor(make(F::PRIOR_SE3, F::ROLE_PRIOR, {pose}, pose3(z), info.data(), 6, id));
 }
 
@@ -189,14 +201,17 @@ loopd::factor_t landmarkFactor(KeyRef pose, KeyRef point, const Eigen::Vector2d&
 }
 loopd::factor_t landmarkFactor(KeyRef pose, KeyRef point, const Eigen::Vector3d& z,
                                const Eigen::Matrix3d& info) {
-  return plain(F::POSE_POINT3, F::ROLE_LANDMARK, {pose, point}, {z.x(), z.y(), z.z()}, info.data(), 3);
+  return plain(F::POSE_POINT3, F::ROLE_LANDMARK, {pose, point}, {z.x(), z.y(), z.z()}, info.data(),
+               3);
 }
 loopd::factor_t bearingRangeFactor(KeyRef pose, KeyRef point, double bearing, double range,
                                    const Eigen::Matrix2d& info) {
-  return plain(F::BEARING_RANGE2, F::ROLE_LANDMARK, {pose, point}, {bearing, range}, info.data(), 2);
+  return plain(F::BEARING_RANGE2, F::ROLE_LANDMARK, {pose, point}, {bearing, range}, info.data(),
+               2);
 }
 
-std::int64_t FactorPublisher::ambiguous(std::int8_t mode, const std::vector<loopd::factor_t>& alternatives,
+std::int64_t FactorPublisher::ambiguous(std::int8_t mode,
+                                        const std::vector<loopd::factor_t>& alternatives,
                                         bool nullHypothesis, double nullWeight, std::int64_t id) {
   checkAmbiguous(mode, alternatives, nullHypothesis, nullWeight);
   const int n = static_cast<int>(alternatives.size());

@@ -36,7 +36,8 @@ struct Pose3 {
 };
 
 /// Where encoded batches go: an LCM publish, a log file, a test's capture.
-using BatchSink = std::function<void(const std::string& channel, const std::vector<std::uint8_t>& bytes)>;
+using BatchSink =
+    std::function<void(const std::string& channel, const std::vector<std::uint8_t>& bytes)>;
 
 class FactorPublisher {
  public:
@@ -51,10 +52,12 @@ class FactorPublisher {
                         const Eigen::Matrix<double, 6, 6>& information, std::int64_t id = -1);
   /// A loop closure (intra- or inter-robot): robust = "" (server default), "none", or a variant.
   std::int64_t loopClosure(KeyRef a, KeyRef b, const Pose2& z, const Eigen::Matrix3d& information,
-                           const std::string& robust = "", double robustParam = 0.0, std::int64_t id = -1);
+                           const std::string& robust = "", double robustParam = 0.0,
+                           std::int64_t id = -1);
   std::int64_t loopClosure(KeyRef a, KeyRef b, const Pose3& z,
                            const Eigen::Matrix<double, 6, 6>& information,
-                           const std::string& robust = "", double robustParam = 0.0, std::int64_t id = -1);
+                           const std::string& robust = "", double robustParam = 0.0,
+                           std::int64_t id = -1);
   /// Landmark position in the pose's body frame (2D or 3D).
   std::int64_t landmark(KeyRef pose, KeyRef point, const Eigen::Vector2d& z,
                         const Eigen::Matrix2d& information, std::int64_t id = -1);
@@ -62,7 +65,8 @@ class FactorPublisher {
                         const Eigen::Matrix3d& information, std::int64_t id = -1);
   std::int64_t bearingRange(KeyRef pose, KeyRef point, double bearing, double range,
                             const Eigen::Matrix2d& information, std::int64_t id = -1);
-  std::int64_t prior(KeyRef pose, const Pose2& z, const Eigen::Matrix3d& information, std::int64_t id = -1);
+  std::int64_t prior(KeyRef pose, const Pose2& z, const Eigen::Matrix3d& information,
+                     std::int64_t id = -1);
   std::int64_t prior(KeyRef pose, const Pose3& z, const Eigen::Matrix<double, 6, 6>& information,
                      std::int64_t id = -1);
   /// k alternatives, at most one true (MULTI_MEASUREMENT: same keys, own measurements;
@@ -111,7 +115,8 @@ class FactorPublisher {
 };
 
 /// Factors to pass to FactorPublisher::ambiguous (nothing is queued; id 0).
-loopd::factor_t loopClosureFactor(KeyRef a, KeyRef b, const Pose2& z, const Eigen::Matrix3d& information);
+loopd::factor_t loopClosureFactor(KeyRef a, KeyRef b, const Pose2& z,
+                                  const Eigen::Matrix3d& information);
 loopd::factor_t loopClosureFactor(KeyRef a, KeyRef b, const Pose3& z,
                                   const Eigen::Matrix<double, 6, 6>& information);
 loopd::factor_t landmarkFactor(KeyRef pose, KeyRef point, const Eigen::Vector2d& z,

@@ -132,8 +132,10 @@ UpdateResult MhBackend::update(const BackendUpdate& u) {
   BackendUpdate first, second;
   first.initial = initial;
   first.removals = u.removals;
-  if (live_.size() > 1) splitScored(u.factors, first.factors, second.factors);
-  else first.factors = u.factors;
+  if (live_.size() > 1)
+    splitScored(u.factors, first.factors, second.factors);
+  else
+    first.factors = u.factors;
   auto apply = [&](const BackendUpdate& part) {
     if (part.factors.empty() && part.initial.empty() && part.removals.empty()) return;
     for (Hypothesis& h : live_) {
@@ -178,8 +180,7 @@ UpdateResult MhBackend::update(const BackendUpdate& u) {
     std::sort(result.moved.begin(), result.moved.end());
     result.moved.erase(std::unique(result.moved.begin(), result.moved.end()), result.moved.end());
   }
-  result.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return result;
 }
 
@@ -233,8 +234,10 @@ void MhBackend::branch(int l) {
         lowest = increase;
         lowestAt = a;
       }
-      if (increase <= gate) children.push_back({p, a, parent.score + increase});
-      else ++predictedAway_;
+      if (increase <= gate)
+        children.push_back({p, a, parent.score + increase});
+      else
+        ++predictedAway_;
     }
     if (layer.null) children.push_back({p, -1, parent.score + nullPenalty(layer)});
     // Without a null, one alternative is true: keep the least implausible.

@@ -22,8 +22,8 @@
 // χ²_d(gateProbability) is not branched on. While several hypotheses live, every later loop
 // closure is scored in each before it is added (a second inner update adds it), and
 // hypotheses are pruned: those more than
-// −2 ln(pruneRatio) worse than the best (a tenth as likely), and all beyond K. optimize() ranks them by χ² at
-// their optimum (plus null penalties).
+// −2 ln(pruneRatio) worse than the best (a tenth as likely), and all beyond K. optimize() ranks
+// them by χ² at their optimum (plus null penalties).
 #include <array>
 #include <cmath>
 #include <memory>
@@ -96,7 +96,7 @@ class MhBackend : public Backend {
     std::unique_ptr<Isam2Backend> tree;
     std::vector<int> choices;  // per layer
     double score = 0.0;
-    std::vector<Key> moved;    // by this update (for UpdateResult::moved)
+    std::vector<Key> moved;  // by this update (for UpdateResult::moved)
   };
   struct Layer {
     FactorId id = 0;
@@ -133,8 +133,8 @@ class MhBackend : public Backend {
   MhOptions mh_;
   std::vector<Hypothesis> live_;  // best first after every update
   std::vector<Layer> layers_;
-  std::unordered_map<FactorId, int> layerIndex_;       // measurement id → layer
-  std::unordered_map<int, double> certainTail_;  // residual dim → χ² tail of certain closures
+  std::unordered_map<FactorId, int> layerIndex_;  // measurement id → layer
+  std::unordered_map<int, double> certainTail_;   // residual dim → χ² tail of certain closures
   std::unordered_map<FactorId, int> ids_;  // factor id → −1 (plain) or its alternative's layer
   Storage peakStorage_;
   long branchesBuilt_ = 0;

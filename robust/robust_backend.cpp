@@ -8,7 +8,9 @@ namespace loopd {
 
 RobustBackend::RobustBackend(std::string name, std::unique_ptr<Backend> inner,
                              RobustBackendOptions options)
-    : DecoratorBackend(std::move(inner), "RobustBackend"), name_(std::move(name)), options_(options) {}
+    : DecoratorBackend(std::move(inner), "RobustBackend"),
+      name_(std::move(name)),
+      options_(options) {}
 
 UpdateResult RobustBackend::update(const BackendUpdate& u) {
   BackendUpdate inner;
@@ -64,7 +66,8 @@ std::vector<std::pair<FactorId, double>> RobustBackend::decisions() const {
   out.reserve(wrapped_.size());
   for (const auto& f : originals_.factors()) {
     auto it = wrapped_.find(f->id());
-    if (it != wrapped_.end()) out.emplace_back(f->id(), wrappedWeight(*it->second, inner_->estimate()));
+    if (it != wrapped_.end())
+      out.emplace_back(f->id(), wrappedWeight(*it->second, inner_->estimate()));
   }
   return out;
 }

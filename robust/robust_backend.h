@@ -39,7 +39,6 @@ class RobustBackend : public DecoratorBackend {
   static constexpr FactorId kInternalIdBit = FactorId{1} << 63;
 
  private:
-
   std::string name_;
   RobustBackendOptions options_;
   std::unordered_map<FactorId, FactorPtr> wrapped_;  // original id → wrapper (uncertain only)

@@ -1,10 +1,10 @@
 #include "robust/robust_factors.h"
 
+#include <array>
 #include <cmath>
 #include <stdexcept>
 #include <utility>
 #include <vector>
-#include <array>
 
 namespace loopd {
 
@@ -43,17 +43,18 @@ template <class W, class... Args>
 std::shared_ptr<W> makeWrapper(const FactorPtr& inner, int maxKeys, Args&&... args) {
   if (!inner) throw std::invalid_argument("robust wrapper: null inner factor");
   switch (inner->size()) {
-    case 1: return std::make_shared<W>(std::make_index_sequence<1>{}, inner, args...);
-    case 2: return std::make_shared<W>(std::make_index_sequence<2>{}, inner, args...);
+    case 1:
+      return std::make_shared<W>(std::make_index_sequence<1>{}, inner, args...);
+    case 2:
+      return std::make_shared<W>(std::make_index_sequence<2>{}, inner, args...);
     case 3:
-      if (maxKeys >= 3)
-        return std::make_shared<W>(std::make_index_sequence<3>{}, inner, args...);
+      if (maxKeys >= 3) return std::make_shared<W>(std::make_index_sequence<3>{}, inner, args...);
       break;
     case 4:
-      if (maxKeys >= 4)
-        return std::make_shared<W>(std::make_index_sequence<4>{}, inner, args...);
+      if (maxKeys >= 4) return std::make_shared<W>(std::make_index_sequence<4>{}, inner, args...);
       break;
-    default: break;
+    default:
+      break;
   }
   throw std::invalid_argument(std::string("robust wrapper: unsupported key count for ") +
                               inner->typeName());
@@ -63,10 +64,14 @@ std::shared_ptr<W> makeWrapper(const FactorPtr& inner, int maxKeys, Args&&... ar
 
 const char* kernelName(KernelType k) {
   switch (k) {
-    case KernelType::Huber: return "huber";
-    case KernelType::Cauchy: return "cauchy";
-    case KernelType::GemanMcClure: return "gm";
-    case KernelType::DCS: return "dcs";
+    case KernelType::Huber:
+      return "huber";
+    case KernelType::Cauchy:
+      return "cauchy";
+    case KernelType::GemanMcClure:
+      return "gm";
+    case KernelType::DCS:
+      return "dcs";
   }
   return "?";
 }
@@ -110,7 +115,8 @@ double kernelWeight(KernelType kernel, double chi2, double p) {
       const double n = std::sqrt(chi2);
       return n <= p ? 1.0 : p / n;
     }
-    case KernelType::Cauchy: return 1.0 / (1.0 + chi2 / (p * p));
+    case KernelType::Cauchy:
+      return 1.0 / (1.0 + chi2 / (p * p));
     case KernelType::GemanMcClure: {
       const double k2 = p * p;
       const double d = k2 + chi2;
@@ -178,8 +184,8 @@ double KernelFactor::weightAt(const Values& values) const {
 
 template <size_t... I>
 SwitchableFactor::SwitchableFactor(std::index_sequence<I...>, FactorPtr inner, Key switchKey)
-    : Factor({{inner->key(I), inner->varType(I)}..., {switchKey, VarType::Scalar}},
-             inner->dim(), inner->role()),
+    : Factor({{inner->key(I), inner->varType(I)}..., {switchKey, VarType::Scalar}}, inner->dim(),
+             inner->role()),
       inner_(std::move(inner)) {
   setId(inner_->id());
 }
@@ -221,8 +227,8 @@ std::unique_ptr<Factor> SwitchPriorFactor::clone() const {
 // --- MaxMixtureFactor --------------------------------------------------------------------
 
 template <size_t... I>
-MaxMixtureFactor::MaxMixtureFactor(std::index_sequence<I...>, FactorPtr inner,
-                                   double nullWeight, double nullSigma)
+MaxMixtureFactor::MaxMixtureFactor(std::index_sequence<I...>, FactorPtr inner, double nullWeight,
+                                   double nullSigma)
     : Factor({{inner->key(I), inner->varType(I)}...}, inner->dim(), inner->role()),
       inner_(std::move(inner)),
       nullWeight_(nullWeight),

@@ -101,8 +101,7 @@ class MaxMixtureFactor final : public Factor {
   static std::shared_ptr<MaxMixtureFactor> make(FactorPtr inner, double nullWeight = 1e-7,
                                                 double nullSigma = 1.6e7);
   template <size_t... I>
-  MaxMixtureFactor(std::index_sequence<I...>, FactorPtr inner, double nullWeight,
-                   double nullSigma);
+  MaxMixtureFactor(std::index_sequence<I...>, FactorPtr inner, double nullWeight, double nullSigma);
 
   void evaluate(const double* const* x, double* r, double* const* J) const override;
   std::unique_ptr<Factor> clone() const override;

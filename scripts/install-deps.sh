@@ -9,6 +9,7 @@ packages=(
   liblcm-dev liblcm-bin liblcm-java default-jdk-headless
   libspdlog-dev libgtest-dev
   libceres-dev          # optional comparison baseline for the benchmarks
+  clang-format          # the format check (tests/CMakeLists.txt, scripts/check-format.sh)
   iproute2 procps
   python3               # tools/compare (and its end-to-end test)
   chromium              # loopd-view's end-to-end test drives it headless (tests/tools/test_loopd_view)

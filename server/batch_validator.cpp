@@ -65,10 +65,14 @@ void FactorBatchValidator::checkFactor(const F& f, std::int64_t reportId,
   const bool prior = f.type <= F::PRIOR_POINT3;
   const bool between = f.type == F::BETWEEN_SE2 || f.type == F::BETWEEN_SE3;
   bool roleOk = false;
-  if (prior) roleOk = f.role == F::ROLE_PRIOR;
-  else if (between) roleOk = f.role == F::ROLE_ODOMETRY || f.role == F::ROLE_LOOP_CLOSURE;
-  else roleOk = f.role == F::ROLE_LANDMARK;
-  if (!roleOk) bad(E::INVALID_FIELD, "role " + std::to_string(f.role) + " not allowed for this type");
+  if (prior)
+    roleOk = f.role == F::ROLE_PRIOR;
+  else if (between)
+    roleOk = f.role == F::ROLE_ODOMETRY || f.role == F::ROLE_LOOP_CLOSURE;
+  else
+    roleOk = f.role == F::ROLE_LANDMARK;
+  if (!roleOk)
+    bad(E::INVALID_FIELD, "role " + std::to_string(f.role) + " not allowed for this type");
 
   const int nk = keyCount(f.type);
   if (f.num_keys != nk || static_cast<int>(f.keys.size()) != nk) {
@@ -98,10 +102,11 @@ void FactorBatchValidator::checkFactor(const F& f, std::int64_t reportId,
   }
 
   const int ms = measurementSize(f.type);
-  const bool measurementSized = f.num_measurement == ms && static_cast<int>(f.measurement.size()) == ms;
+  const bool measurementSized =
+      f.num_measurement == ms && static_cast<int>(f.measurement.size()) == ms;
   if (!measurementSized)
-    bad(E::WRONG_DIMENSION, std::to_string(f.num_measurement) + " measurement numbers, expected " +
-                                std::to_string(ms));
+    bad(E::WRONG_DIMENSION,
+        std::to_string(f.num_measurement) + " measurement numbers, expected " + std::to_string(ms));
   else if (!allFinite(f.measurement))
     bad(E::NON_FINITE, "measurement has NaN or Inf");
   else if (ms == 7) {
@@ -117,7 +122,8 @@ void FactorBatchValidator::checkFactor(const F& f, std::int64_t reportId,
   const int d = factorDim(f.type);
   const int nn = d * (d + 1) / 2;
   if (f.num_noise != nn || static_cast<int>(f.noise.size()) != nn) {
-    bad(E::WRONG_DIMENSION, std::to_string(f.num_noise) + " noise entries, expected " + std::to_string(nn));
+    bad(E::WRONG_DIMENSION,
+        std::to_string(f.num_noise) + " noise entries, expected " + std::to_string(nn));
   } else if (!allFinite(f.noise)) {
     bad(E::NON_FINITE, "noise has NaN or Inf");
   } else {
@@ -144,8 +150,9 @@ void FactorBatchValidator::checkFactor(const F& f, std::int64_t reportId,
     bad(E::INVALID_FIELD, "unknown robust handling '" + f.robust + "'");
   else if ((f.role == F::ROLE_PRIOR || f.role == F::ROLE_ODOMETRY) && !f.robust.empty() &&
            f.robust != "none")
-    bad(E::INVALID_FIELD, "robust '" + f.robust +
-                              "' on a prior or odometry factor: those are trusted (use \"\" or \"none\")");
+    bad(E::INVALID_FIELD,
+        "robust '" + f.robust +
+            "' on a prior or odometry factor: those are trusted (use \"\" or \"none\")");
   if (!std::isfinite(f.robust_param) || f.robust_param < 0.0)
     bad(E::INVALID_FIELD, "robust_param " + num(f.robust_param) + " must be finite and >= 0");
 }
@@ -166,8 +173,8 @@ void FactorBatchValidator::checkAmbiguous(const loopd::ambiguous_factor_t& a,
   }
   const int k = a.num_alternatives;
   if (k > A::MAX_ALTERNATIVES)
-    bad(E::LIMIT_EXCEEDED, std::to_string(k) + " alternatives, at most " +
-                               std::to_string(A::MAX_ALTERNATIVES));
+    bad(E::LIMIT_EXCEEDED,
+        std::to_string(k) + " alternatives, at most " + std::to_string(A::MAX_ALTERNATIVES));
   if (k < (a.null_hypothesis ? 1 : 2))
     bad(E::INVALID_FIELD, std::to_string(k) + " alternative(s): need at least 2, or 1 with " +
                               "null_hypothesis (otherwise send a factor_t)");
@@ -186,8 +193,8 @@ void FactorBatchValidator::checkAmbiguous(const loopd::ambiguous_factor_t& a,
     }
     if (!one.empty()) continue;
     if (f.role != F::ROLE_LOOP_CLOSURE && f.role != F::ROLE_LANDMARK)
-      bad(E::INVALID_FIELD, "alternative " + std::to_string(i) +
-                                ": role must be ROLE_LOOP_CLOSURE or ROLE_LANDMARK");
+      bad(E::INVALID_FIELD,
+          "alternative " + std::to_string(i) + ": role must be ROLE_LOOP_CLOSURE or ROLE_LANDMARK");
   }
   if (out.size() != before || k < 1 || k > A::MAX_ALTERNATIVES) return;
   // Every alternative well-formed: the group's own rules.
@@ -230,9 +237,10 @@ std::vector<Issue> FactorBatchValidator::check(const B& b) const {
   if (b.sender.empty()) whole(E::INVALID_FIELD, "empty sender");
   if (b.sender.size() > static_cast<size_t>(B::MAX_SENDER_LENGTH))
     whole(E::LIMIT_EXCEEDED, "sender longer than 63 characters");
-  if (b.sequence < 1) whole(E::INVALID_FIELD, "sequence " + std::to_string(b.sequence) + " must be >= 1");
-  if (b.num_factors < 0 || b.num_ambiguous < 0 || b.num_initial_values < 0 || b.num_remove_ids < 0 ||
-      static_cast<size_t>(b.num_factors) != b.factors.size() ||
+  if (b.sequence < 1)
+    whole(E::INVALID_FIELD, "sequence " + std::to_string(b.sequence) + " must be >= 1");
+  if (b.num_factors < 0 || b.num_ambiguous < 0 || b.num_initial_values < 0 ||
+      b.num_remove_ids < 0 || static_cast<size_t>(b.num_factors) != b.factors.size() ||
       static_cast<size_t>(b.num_ambiguous) != b.ambiguous.size() ||
       static_cast<size_t>(b.num_initial_values) != b.initial_values.size() ||
       static_cast<size_t>(b.num_remove_ids) != b.remove_ids.size()) {
@@ -240,9 +248,11 @@ std::vector<Issue> FactorBatchValidator::check(const B& b) const {
     return out;
   }
   size_t items = b.factors.size() + b.initial_values.size() + b.remove_ids.size();
-  for (const auto& a : b.ambiguous) items += static_cast<size_t>(std::max<int>(0, a.num_alternatives));
+  for (const auto& a : b.ambiguous)
+    items += static_cast<size_t>(std::max<int>(0, a.num_alternatives));
   if (items > static_cast<size_t>(B::MAX_ITEMS))
-    whole(E::LIMIT_EXCEEDED, std::to_string(items) + " items, at most " + std::to_string(B::MAX_ITEMS));
+    whole(E::LIMIT_EXCEEDED,
+          std::to_string(items) + " items, at most " + std::to_string(B::MAX_ITEMS));
   if (!out.empty()) return out;
 
   std::unordered_set<std::int64_t> ids;
@@ -252,7 +262,8 @@ std::vector<Issue> FactorBatchValidator::check(const B& b) const {
       return;
     }
     if (!ids.insert(id).second)
-      out.push_back({id, E::DUPLICATE_FACTOR_ID, "id " + std::to_string(id) + " appears twice in the batch"});
+      out.push_back(
+          {id, E::DUPLICATE_FACTOR_ID, "id " + std::to_string(id) + " appears twice in the batch"});
   };
   for (const auto& f : b.factors) {
     checkId(f.id);
@@ -272,32 +283,48 @@ std::vector<Issue> FactorBatchValidator::check(const B& b) const {
     int want = 0;
     bool pose = true;
     switch (v.type) {
-      case loopd::initial_value_t::SE2: want = 3; break;
-      case loopd::initial_value_t::SE3: want = 7; break;
-      case loopd::initial_value_t::POINT2: want = 2; pose = false; break;
-      case loopd::initial_value_t::POINT3: want = 3; pose = false; break;
+      case loopd::initial_value_t::SE2:
+        want = 3;
+        break;
+      case loopd::initial_value_t::SE3:
+        want = 7;
+        break;
+      case loopd::initial_value_t::POINT2:
+        want = 2;
+        pose = false;
+        break;
+      case loopd::initial_value_t::POINT3:
+        want = 3;
+        pose = false;
+        break;
       default:
-        out.push_back({-1, E::INVALID_FIELD, name + ": unknown value type " + std::to_string(v.type)});
+        out.push_back(
+            {-1, E::INVALID_FIELD, name + ": unknown value type " + std::to_string(v.type)});
         continue;
     }
     if ((v.key.kind == loopd::key_t::POSE) != pose)
-      out.push_back({-1, E::WRONG_KEY_KIND, name + ": a " + (pose ? "pose" : "point") +
-                                                " value for a " + (pose ? "landmark" : "pose")});
+      out.push_back({-1, E::WRONG_KEY_KIND,
+                     name + ": a " + (pose ? "pose" : "point") + " value for a " +
+                         (pose ? "landmark" : "pose")});
     if (v.num_value != want || static_cast<int>(v.value.size()) != want)
-      out.push_back({-1, E::WRONG_DIMENSION, name + ": " + std::to_string(v.num_value) +
-                                                 " numbers, expected " + std::to_string(want)});
+      out.push_back({-1, E::WRONG_DIMENSION,
+                     name + ": " + std::to_string(v.num_value) + " numbers, expected " +
+                         std::to_string(want)});
     else if (!allFinite(v.value))
       out.push_back({-1, E::NON_FINITE, name + ": NaN or Inf"});
     else if (want == 7) {
       double norm;
       if (!quaternionOk(&v.value[3], norm))
-        out.push_back({-1, E::INVALID_FIELD, name + ": quaternion norm " + num(norm) + " is not 1"});
+        out.push_back(
+            {-1, E::INVALID_FIELD, name + ": quaternion norm " + num(norm) + " is not 1"});
     }
   }
   for (std::int64_t id : b.remove_ids) {
-    if (id < 0) out.push_back({id, E::INVALID_FIELD, "removal id " + std::to_string(id) + " is negative"});
+    if (id < 0)
+      out.push_back({id, E::INVALID_FIELD, "removal id " + std::to_string(id) + " is negative"});
     else if (ids.count(id))
-      out.push_back({id, E::UNKNOWN_FACTOR_ID, "removal of id " + std::to_string(id) + " added in the same batch"});
+      out.push_back({id, E::UNKNOWN_FACTOR_ID,
+                     "removal of id " + std::to_string(id) + " added in the same batch"});
   }
   return out;
 }
@@ -309,9 +336,12 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
     if ((f.robust == "gnc-gm" || f.robust == "gnc-tls" || f.robust == "risam") &&
         f.robust != g.solver())
       out.push_back({reportId, E::INVALID_FIELD,
-                     "robust '" + f.robust + "' is a whole-graph scheme: it applies only as the "
-                     "server's --solver (now '" + g.solver() + "'); per factor use none, huber, "
-                     "cauchy, gm, dcs, sc or mm"});
+                     "robust '" + f.robust +
+                         "' is a whole-graph scheme: it applies only as the "
+                         "server's --solver (now '" +
+                         g.solver() +
+                         "'); per factor use none, huber, "
+                         "cauchy, gm, dcs, sc or mm"});
   };
   for (const auto& f : b.factors) scheme(f, f.id);
   for (const auto& a : b.ambiguous)
@@ -340,8 +370,9 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
     auto it = seen.find(k);
     if (!known && it != seen.end()) known = it->second;
     if (known && *known != t) {
-      out.push_back({id, E::WRONG_DIMENSION, what + ": " + keyToString(k) + " is " +
-                                                 varTypeName(*known) + ", used as " + varTypeName(t)});
+      out.push_back({id, E::WRONG_DIMENSION,
+                     what + ": " + keyToString(k) + " is " + varTypeName(*known) + ", used as " +
+                         varTypeName(t)});
       return;
     }
     seen.emplace(k, t);
@@ -350,16 +381,17 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
       auto jt = robotType.find(keyRobot(k));
       if (!rt && jt != robotType.end()) rt = jt->second;
       if (rt && *rt != t)
-        out.push_back({id, E::WRONG_DIMENSION, what + ": robot " + std::to_string(keyRobot(k)) +
-                                                   " has " + varTypeName(*rt) + " poses, " +
-                                                   keyToString(k) + " used as " + varTypeName(t)});
-      else robotType.emplace(keyRobot(k), t);
+        out.push_back({id, E::WRONG_DIMENSION,
+                       what + ": robot " + std::to_string(keyRobot(k)) + " has " +
+                           varTypeName(*rt) + " poses, " + keyToString(k) + " used as " +
+                           varTypeName(t)});
+      else
+        robotType.emplace(keyRobot(k), t);
     }
   };
   for (const auto& f : b.factors)
     for (int i = 0; i < f.num_keys; ++i)
-      use(toKey(f.keys[static_cast<size_t>(i)]), slotVarType(f.type, i), f.id,
-          itemName(f, f.id));
+      use(toKey(f.keys[static_cast<size_t>(i)]), slotVarType(f.type, i), f.id, itemName(f, f.id));
   for (const auto& a : b.ambiguous)
     for (const auto& f : a.alternatives)
       for (int i = 0; i < f.num_keys; ++i)
@@ -391,10 +423,10 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
       break;  // one issue per group
     }
   for (const auto& v : b.initial_values) {
-    const VarType t = v.type == loopd::initial_value_t::SE2   ? VarType::SE2
-                      : v.type == loopd::initial_value_t::SE3 ? VarType::SE3
+    const VarType t = v.type == loopd::initial_value_t::SE2      ? VarType::SE2
+                      : v.type == loopd::initial_value_t::SE3    ? VarType::SE3
                       : v.type == loopd::initial_value_t::POINT2 ? VarType::Point2
-                                                                  : VarType::Point3;
+                                                                 : VarType::Point3;
     use(toKey(v.key), t, -1, "initial value of " + wireKeyName(v.key));
   }
   return out;

@@ -34,10 +34,14 @@ Key anchorKey(std::uint32_t robot) { return makeKey(robot, KeyKind::Anchor, 0); 
 
 FactorRole roleOf(int role) {
   switch (role) {
-    case W::ROLE_PRIOR: return FactorRole::Prior;
-    case W::ROLE_ODOMETRY: return FactorRole::Odometry;
-    case W::ROLE_LANDMARK: return FactorRole::Landmark;
-    default: return FactorRole::LoopClosure;
+    case W::ROLE_PRIOR:
+      return FactorRole::Prior;
+    case W::ROLE_ODOMETRY:
+      return FactorRole::Odometry;
+    case W::ROLE_LANDMARK:
+      return FactorRole::Landmark;
+    default:
+      return FactorRole::LoopClosure;
   }
 }
 
@@ -55,7 +59,9 @@ std::shared_ptr<Factor> buildFactor(const W& f) {
     case W::PRIOR_SE2:
       out = std::make_shared<PriorFactorSE2>(a, SE2(m[0], m[1], m[2]), Eigen::Matrix3d(info));
       break;
-    case W::PRIOR_SE3: out = std::make_shared<PriorFactorSE3>(a, se3From(m), Mat6(info)); break;
+    case W::PRIOR_SE3:
+      out = std::make_shared<PriorFactorSE3>(a, se3From(m), Mat6(info));
+      break;
     case W::PRIOR_POINT2:
       out = std::make_shared<PriorFactorPoint2>(a, Vec2(m[0], m[1]), Eigen::Matrix2d(info));
       break;
@@ -63,7 +69,8 @@ std::shared_ptr<Factor> buildFactor(const W& f) {
       out = std::make_shared<PriorFactorPoint3>(a, Vec3(m[0], m[1], m[2]), Mat3(info));
       break;
     case W::BETWEEN_SE2:
-      out = std::make_shared<BetweenFactorSE2>(a, b, SE2(m[0], m[1], m[2]), Eigen::Matrix3d(info), role);
+      out = std::make_shared<BetweenFactorSE2>(a, b, SE2(m[0], m[1], m[2]), Eigen::Matrix3d(info),
+                                               role);
       break;
     case W::BETWEEN_SE3:
       out = std::make_shared<BetweenFactorSE3>(a, b, se3From(m), Mat6(info), role);
@@ -75,16 +82,19 @@ std::shared_ptr<Factor> buildFactor(const W& f) {
       out = std::make_shared<PosePointFactor3>(a, b, Vec3(m[0], m[1], m[2]), Mat3(info), role);
       break;
     case W::BEARING_RANGE2:
-      out = std::make_shared<BearingRangeFactor2>(a, b, Vec2(m[0], m[1]), Eigen::Matrix2d(info), role);
+      out = std::make_shared<BearingRangeFactor2>(a, b, Vec2(m[0], m[1]), Eigen::Matrix2d(info),
+                                                  role);
       break;
-    default: throw std::invalid_argument("unknown factor type");
+    default:
+      throw std::invalid_argument("unknown factor type");
   }
   out->setRole(role);
   return out;
 }
 
 bool isInterRobot(const W& f) {
-  return (f.type == W::BETWEEN_SE2 || f.type == W::BETWEEN_SE3) && f.keys[0].robot != f.keys[1].robot;
+  return (f.type == W::BETWEEN_SE2 || f.type == W::BETWEEN_SE3) &&
+         f.keys[0].robot != f.keys[1].robot;
 }
 
 // An inter-robot between factor (`built` = its intra-robot form) evaluated through the robots'
@@ -95,8 +105,8 @@ std::shared_ptr<Factor> anchoredFactor(const W& wf, const Factor& built) {
   const Eigen::MatrixXd info = informationOf(wf);
   if (wf.type == W::BETWEEN_SE2) {
     const auto& bf = static_cast<const BetweenFactorSE2&>(built);
-    return std::make_shared<AnchoredBetweenFactorSE2>(ar, xr, as, xs, bf.measured(),
-                                                      Eigen::Matrix3d(info), FactorRole::LoopClosure);
+    return std::make_shared<AnchoredBetweenFactorSE2>(
+        ar, xr, as, xs, bf.measured(), Eigen::Matrix3d(info), FactorRole::LoopClosure);
   }
   const auto& bf = static_cast<const BetweenFactorSE3&>(built);
   return std::make_shared<AnchoredBetweenFactorSE3>(ar, xr, as, xs, bf.measured(), Mat6(info),
@@ -107,7 +117,10 @@ std::shared_ptr<Factor> anchoredFactor(const W& wf, const Factor& built) {
 bool isAnchored(const Factor& f) { return f.size() == 4; }
 
 std::string fingerprintName(std::int64_t hash) {
-  struct T { std::int64_t h; const char* n; };
+  struct T {
+    std::int64_t h;
+    const char* n;
+  };
   const T known[] = {{loopd::command_t::getHash(), "command_t"},
                      {loopd::estimate_t::getHash(), "estimate_t"},
                      {loopd::covariance_t::getHash(), "covariance_t"},
@@ -239,7 +252,8 @@ std::map<std::uint32_t, std::uint32_t> Engine::frameGroups(const loopd::factor_b
   for (const auto& [id, e] : edges) join(e.first, e.second);
   for (const auto& f : b.factors)
     if (isInterRobot(f))
-      join(static_cast<std::uint32_t>(f.keys[0].robot), static_cast<std::uint32_t>(f.keys[1].robot));
+      join(static_cast<std::uint32_t>(f.keys[0].robot),
+           static_cast<std::uint32_t>(f.keys[1].robot));
   std::map<std::uint32_t, std::uint32_t> out;
   for (const auto& [r, p] : parent) out[r] = find(r);
   return out;
@@ -280,7 +294,8 @@ bool Engine::step() {
   retryHolds();
   const std::int64_t seq = updateSeq_;
   flush();
-  if (updateSeq_ == seq) publishStatus(0, false);  // nothing applied: still tell (held, refused, ...)
+  if (updateSeq_ == seq)
+    publishStatus(0, false);  // nothing applied: still tell (held, refused, ...)
   return true;
 }
 
@@ -320,7 +335,8 @@ void Engine::run(const std::atomic<bool>& stop) {
   while (!stop.load()) {
     {
       std::unique_lock<std::mutex> l(qmu_);
-      qcv_.wait_for(l, std::chrono::milliseconds(50), [&] { return !queue_.empty() || stop.load(); });
+      qcv_.wait_for(l, std::chrono::milliseconds(50),
+                    [&] { return !queue_.empty() || stop.load(); });
     }
     step();
     idle();
@@ -379,11 +395,13 @@ void Engine::handleFactors(std::shared_ptr<const Inbound> m, bool replayed) {
     ++counters_.rejected;
   };
   if (static_cast<int>(bytes.size()) > opt_.maxMessageBytes) {
-    decodeError(E::DECODE_FAILED, "message of " + std::to_string(bytes.size()) + " bytes exceeds the limit");
+    decodeError(E::DECODE_FAILED,
+                "message of " + std::to_string(bytes.size()) + " bytes exceeds the limit");
     return;
   }
   if (bytes.size() < 8) {
-    decodeError(E::DECODE_FAILED, "message of " + std::to_string(bytes.size()) + " bytes is too short");
+    decodeError(E::DECODE_FAILED,
+                "message of " + std::to_string(bytes.size()) + " bytes is too short");
     return;
   }
   const std::int64_t hash = readHash(bytes.data());
@@ -402,10 +420,11 @@ void Engine::handleFactors(std::shared_ptr<const Inbound> m, bool replayed) {
     used = -1;
   }
   if (used < 0 || used != static_cast<int>(bytes.size())) {
-    decodeError(E::DECODE_FAILED, used < 0 ? "factor_batch_t does not decode (truncated or corrupt)"
-                                           : "factor_batch_t followed by " +
-                                                 std::to_string(static_cast<int>(bytes.size()) - used) +
-                                                 " trailing bytes");
+    decodeError(E::DECODE_FAILED, used < 0
+                                      ? "factor_batch_t does not decode (truncated or corrupt)"
+                                      : "factor_batch_t followed by " +
+                                            std::to_string(static_cast<int>(bytes.size()) - used) +
+                                            " trailing bytes");
     return;
   }
   // Static checks of sender/sequence first: a batch without a usable identity is refused
@@ -454,15 +473,24 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   for (Key k : keys)
     if (const Values* h = holder(k)) knownVals.insertFrom(*h, h->slot(k));
   for (Key k : altKeys)
-    if (const Values* h = holder(k); h && !knownVals.contains(k)) knownVals.insertFrom(*h, h->slot(k));
+    if (const Values* h = holder(k); h && !knownVals.contains(k))
+      knownVals.insertFrom(*h, h->slot(k));
   for (const auto& v : b.initial_values) {
     const Key k = toKey(v.key);
     if (known(k) || guess.contains(k) || !std::binary_search(keys.begin(), keys.end(), k)) continue;
     switch (v.type) {
-      case loopd::initial_value_t::SE2: guess.insert(k, SE2(v.value[0], v.value[1], v.value[2])); break;
-      case loopd::initial_value_t::SE3: guess.insert(k, se3From(v.value)); break;
-      case loopd::initial_value_t::POINT2: guess.insertPoint2(k, Vec2(v.value[0], v.value[1])); break;
-      default: guess.insertPoint3(k, Vec3(v.value[0], v.value[1], v.value[2])); break;
+      case loopd::initial_value_t::SE2:
+        guess.insert(k, SE2(v.value[0], v.value[1], v.value[2]));
+        break;
+      case loopd::initial_value_t::SE3:
+        guess.insert(k, se3From(v.value));
+        break;
+      case loopd::initial_value_t::POINT2:
+        guess.insertPoint2(k, Vec2(v.value[0], v.value[1]));
+        break;
+      default:
+        guess.insertPoint3(k, Vec3(v.value[0], v.value[1], v.value[2]));
+        break;
     }
   }
   // A robot never seen starts at the origin of its own frame: its lowest pose in the batch
@@ -474,7 +502,8 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   for (const auto& f : b.factors)
     for (int i = 0; i < f.num_keys; ++i) {
       const Key k = toKey(f.keys[static_cast<size_t>(i)]);
-      if (keyKind(k) != KeyKind::Pose || robots_.count(keyRobot(k)) || robotsWithGuess.count(keyRobot(k)))
+      if (keyKind(k) != KeyKind::Pose || robots_.count(keyRobot(k)) ||
+          robotsWithGuess.count(keyRobot(k)))
         continue;
       auto it = lowestNew.find(keyRobot(k));
       if (it == lowestNew.end() || k < it->second) lowestNew[keyRobot(k)] = k;
@@ -487,8 +516,10 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
                              slotVarType(f.type, i));
   if (!lowestNew.empty() && !sessions_.hasGapBelow(b.sender, b.sequence))
     for (const auto& [robot, k] : lowestNew) {
-      if (newRobotType[robot] == VarType::SE3) guess.insert(k, SE3());
-      else guess.insert(k, SE2());
+      if (newRobotType[robot] == VarType::SE3)
+        guess.insert(k, SE3());
+      else
+        guess.insert(k, SE2());
     }
 
   // Solver factors; inter-robot ones are built once anchors are known.
@@ -539,10 +570,11 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
         if (keyKind(guess.key(t)) == KeyKind::Pose && keyRobot(guess.key(t)) == r)
           first = std::min(first, guess.key(t));
       it->second.firstPose = first;
-      if (!hasPrior) addServerFactor(priorAt(first, guess, guess.slot(first), opt_.priorInformation));
+      if (!hasPrior)
+        addServerFactor(priorAt(first, guess, guess.slot(first), opt_.priorInformation));
     }
-    it->second.latestIndex = std::max<std::int64_t>(it->second.latestIndex,
-                                                    static_cast<std::int64_t>(keyIndex(k)));
+    it->second.latestIndex =
+        std::max<std::int64_t>(it->second.latestIndex, static_cast<std::int64_t>(keyIndex(k)));
   }
   // The batch's factors.
   Values batchValues = knownVals;  // known ∪ guess, for anchor initialisation
@@ -589,8 +621,10 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   }
   for (std::int64_t rid : b.remove_ids) {
     const FactorId fid = sessions_.removeId(b.sender, rid);
-    if (isGroupId(fid)) st.groupRemovals.push_back(fid);
-    else u.removals.push_back(fid);
+    if (isGroupId(fid))
+      st.groupRemovals.push_back(fid);
+    else
+      u.removals.push_back(fid);
     st.removedIds.emplace_back(rid, fid);
   }
   // Server-owned factors got ids after the sender's: give them theirs now.
@@ -614,7 +648,8 @@ FactorPtr Engine::priorAt(Key k, const Values& from, int slot, double informatio
   if (from.type(slot) == VarType::SE3)
     f = std::make_shared<PriorFactorSE3>(k, from.se3(slot), Mat6::Identity() * information);
   else
-    f = std::make_shared<PriorFactorSE2>(k, from.se2(slot), Eigen::Matrix3d::Identity() * information);
+    f = std::make_shared<PriorFactorSE2>(k, from.se2(slot),
+                                         Eigen::Matrix3d::Identity() * information);
   f->setId(newFactorId());
   return f;
 }
@@ -635,8 +670,10 @@ void Engine::joinRobots(std::uint32_t r, std::uint32_t s, Key xr, Key xs, const 
   };
   auto insertAnchor = [&](Key a, const SE2& v2, const SE3& v3, double info) -> FactorId {
     Values one;
-    if (se3) one.insert(a, v3);
-    else one.insert(a, v2);
+    if (se3)
+      one.insert(a, v3);
+    else
+      one.insert(a, v2);
     u.initial.insertFrom(one, 0);
     stagedValues_.insertFrom(one, 0);
     if (info <= 0.0) return FactorId{0};
@@ -720,7 +757,8 @@ void Engine::expireHolds(bool all) {
     const bool tooOld = std::chrono::duration<double>(now - h.since).count() > opt_.holdSeconds;
     if (!all && !tooMany && !tooOld) break;
     std::string keys;
-    for (size_t i = 0; i < h.waiting.size() && i < 8; ++i) keys += (i ? ", " : "") + keyToString(h.waiting[i]);
+    for (size_t i = 0; i < h.waiting.size() && i < 8; ++i)
+      keys += (i ? ", " : "") + keyToString(h.waiting[i]);
     const auto& b = *h.d.batch;
     const std::string reason = "held " + num(std::chrono::duration<double>(now - h.since).count()) +
                                " s waiting for " + keys + (tooMany ? " (hold queue full)" : "") +
@@ -815,7 +853,8 @@ void Engine::flush() {
     moved = applyUpdate(all, groupRemovals);
   } catch (const std::exception& e) {
     ok = false;
-    spdlog::error("update of {} batches failed ({}); applying them one by one", staged_.size(), e.what());
+    spdlog::error("update of {} batches failed ({}); applying them one by one", staged_.size(),
+                  e.what());
   }
   std::vector<Staged> round;
   round.swap(staged_);
@@ -842,9 +881,10 @@ void Engine::flush() {
         undo(one);
         spdlog::error("sender '{}' seq {}: backend refused the batch: {}", s.d.batch->sender,
                       s.d.batch->sequence, e.what());
-        pub_.error(s.d.batch->sender, s.d.batch->sequence, 0, -1, E::INTERNAL,
-                   std::string("the solver refused the batch (not applied; graph intact): ") + e.what(),
-                   s.d.raw->channel);
+        pub_.error(
+            s.d.batch->sender, s.d.batch->sequence, 0, -1, E::INTERNAL,
+            std::string("the solver refused the batch (not applied; graph intact): ") + e.what(),
+            s.d.raw->channel);
         std::lock_guard<std::mutex> l(countersMu_);
         ++counters_.internalErrors;
       }
@@ -854,7 +894,8 @@ void Engine::flush() {
   if (regroupNeeded_) regroup(moved);
   const double sec = std::chrono::duration<double>(Clock::now() - t0).count();
   dirty_ = true;
-  if (!replaying_) afterUpdate(moved, sec, false);
+  if (!replaying_)
+    afterUpdate(moved, sec, false);
   else {
     ++updateSeq_;
     std::lock_guard<std::mutex> l(countersMu_);
@@ -935,14 +976,17 @@ void Engine::publishEstimates(const std::vector<Key>* moved, std::int64_t reques
     for (const auto& [r, info] : robots_) full.insert(r);
   } else {
     for (Key k : *moved) {
-      if (keyKind(k) == KeyKind::Anchor) full.insert(keyRobot(k));
-      else if (keyKind(k) == KeyKind::Pose || keyKind(k) == KeyKind::Landmark) keysOf[keyRobot(k)].push_back(k);
+      if (keyKind(k) == KeyKind::Anchor)
+        full.insert(keyRobot(k));
+      else if (keyKind(k) == KeyKind::Pose || keyKind(k) == KeyKind::Landmark)
+        keysOf[keyRobot(k)].push_back(k);
     }
   }
   if (!full.empty())
     for (int s = 0; s < est.size(); ++s) {
       const Key k = est.key(s);
-      if (full.count(keyRobot(k)) && (keyKind(k) == KeyKind::Pose || keyKind(k) == KeyKind::Landmark))
+      if (full.count(keyRobot(k)) &&
+          (keyKind(k) == KeyKind::Pose || keyKind(k) == KeyKind::Landmark))
         keysOf[keyRobot(k)].push_back(k);
     }
   for (auto& [r, keys] : keysOf) {
@@ -953,7 +997,8 @@ void Engine::publishEstimates(const std::vector<Key>* moved, std::int64_t reques
     e.hypothesis = hypothesis;
     e.fullSnapshot = full.count(r) > 0 && !moved ? true : full.count(r) > 0;
     e.se3 = rit != robots_.end() && rit->second.poseType == VarType::SE3;
-    const bool anchored = rit != robots_.end() && rit->second.anchored && est.contains(anchorKey(r));
+    const bool anchored =
+        rit != robots_.end() && rit->second.anchored && est.contains(anchorKey(r));
     e.commonFrame = anchored;
     e.frameRobot = static_cast<std::int32_t>(anchored ? root(r) : r);
     std::sort(keys.begin(), keys.end());
@@ -961,8 +1006,10 @@ void Engine::publishEstimates(const std::vector<Key>* moved, std::int64_t reques
     SE2 A2;
     SE3 A3;
     if (anchored) {
-      if (e.se3) A3 = se3Of(est, anchorKey(r));
-      else A2 = se2Of(est, anchorKey(r));
+      if (e.se3)
+        A3 = se3Of(est, anchorKey(r));
+      else
+        A2 = se2Of(est, anchorKey(r));
     }
     for (Key k : keys) {
       const int s = est.slot(k);
@@ -995,7 +1042,8 @@ void Engine::publishEstimates(const std::vector<Key>* moved, std::int64_t reques
           e.landmarks3d = true;
           break;
         }
-        default: break;
+        default:
+          break;
       }
     }
     pub_.estimate(e, updateSeq_, requestId);
@@ -1018,7 +1066,8 @@ Eigen::MatrixXd Engine::commonFrameCovariance(const std::vector<Key>& keys) {
     anchorCol[i] = static_cast<int>(it - vars.begin());
   }
   std::vector<int> off(vars.size() + 1, 0);
-  for (size_t i = 0; i < vars.size(); ++i) off[i + 1] = off[i] + varDim(est.type(est.slot(vars[i])));
+  for (size_t i = 0; i < vars.size(); ++i)
+    off[i + 1] = off[i] + varDim(est.type(est.slot(vars[i])));
   const Eigen::MatrixXd S = backend_->marginalCovariance(vars);
   if (vars.size() == keys.size()) return S;
   const int D = off[keys.size()];
@@ -1031,8 +1080,12 @@ Eigen::MatrixXd Engine::commonFrameCovariance(const std::vector<Key>& keys) {
     const int ac = off[static_cast<size_t>(anchorCol[i])];
     const int as = est.slot(vars[static_cast<size_t>(anchorCol[i])]);
     switch (est.type(s)) {
-      case VarType::SE2: J.block(off[i], ac, 3, 3) = adjointSE2(est.se2(s).inverse()); break;
-      case VarType::SE3: J.block(off[i], ac, 6, 6) = est.se3(s).inverse().adjoint(); break;
+      case VarType::SE2:
+        J.block(off[i], ac, 3, 3) = adjointSE2(est.se2(s).inverse());
+        break;
+      case VarType::SE3:
+        J.block(off[i], ac, 6, 6) = est.se3(s).inverse().adjoint();
+        break;
       case VarType::Point2: {
         const Mat2 R = est.se2(as).R();
         const Vec2 p = est.point2(s);
@@ -1048,7 +1101,8 @@ Eigen::MatrixXd Engine::commonFrameCovariance(const std::vector<Key>& keys) {
         J.block(off[i], ac + 3, 3, 3) = -R * hat(est.point3(s));
         break;
       }
-      default: break;
+      default:
+        break;
     }
   }
   return J * S * J.transpose();
@@ -1173,8 +1227,10 @@ void Engine::publishStatus(std::int64_t requestId, bool fullDecisions, int hypot
   for (const auto& [r, info] : robots_) s.robots_in_common_frame += info.anchored ? 1 : 0;
   const Values& est = backend_->estimate();
   for (Key k : est.keys()) {
-    if (keyKind(k) == KeyKind::Pose) ++s.poses;
-    else if (keyKind(k) == KeyKind::Landmark) ++s.landmarks;
+    if (keyKind(k) == KeyKind::Pose)
+      ++s.poses;
+    else if (keyKind(k) == KeyKind::Landmark)
+      ++s.landmarks;
   }
   s.factors = static_cast<std::int64_t>(live_.size());
   s.loop_closures = loopClosures_;
@@ -1301,7 +1357,8 @@ void Engine::handleCommand(const Inbound& m) {
   if (m.bytes.size() >= 8 && readHash(m.bytes.data()) != loopd::command_t::getHash()) {
     const std::string name = fingerprintName(readHash(m.bytes.data()));
     pub_.error("", 0, 0, -1, E::WRONG_FINGERPRINT,
-               "fingerprint does not match command_t" + (name.empty() ? std::string() : " (it is a " + name + ")"),
+               "fingerprint does not match command_t" +
+                   (name.empty() ? std::string() : " (it is a " + name + ")"),
                m.channel);
     return;
   }
@@ -1341,7 +1398,8 @@ void Engine::handleCommand(const Inbound& m) {
           const Key key = toKey(k);
           if (k.robot < 0 || k.index < 0 || (k.kind != 0 && k.kind != 1) ||
               !backend_->estimate().contains(key)) {
-            commandError(c, E::UNKNOWN_KEY, "key " + wireKeyName(k) + " is not in the graph", m.channel);
+            commandError(c, E::UNKNOWN_KEY, "key " + wireKeyName(k) + " is not in the graph",
+                         m.channel);
             return;
           }
           keys.push_back(key);
@@ -1352,7 +1410,8 @@ void Engine::handleCommand(const Inbound& m) {
         }
         const bool joint = c.argument.empty() || c.argument == "joint";
         if (!joint && c.argument != "marginals") {
-          commandError(c, E::COMMAND_FAILED, "argument must be \"\", \"joint\" or \"marginals\"", m.channel);
+          commandError(c, E::COMMAND_FAILED, "argument must be \"\", \"joint\" or \"marginals\"",
+                       m.channel);
           return;
         }
         std::vector<int> dims;
@@ -1362,7 +1421,8 @@ void Engine::handleCommand(const Inbound& m) {
           D += dims.back();
         }
         if (joint && D > loopd::covariance_t::MAX_JOINT_DIM) {
-          commandError(c, E::LIMIT_EXCEEDED, "joint dimension " + std::to_string(D) + " exceeds 72", m.channel);
+          commandError(c, E::LIMIT_EXCEEDED, "joint dimension " + std::to_string(D) + " exceeds 72",
+                       m.channel);
           return;
         }
         const size_t per = joint ? keys.size() : static_cast<size_t>(loopd::covariance_t::MAX_KEYS);
@@ -1424,15 +1484,18 @@ void Engine::handleCommand(const Inbound& m) {
             ds.is3d |= v.type == io::VertexType::SE3;
             ds.poses.push_back(v);
           } else if (keyKind(k) == KeyKind::Landmark) {
-            v.type = est.type(s) == VarType::Point3 ? io::VertexType::Point3 : io::VertexType::Point2;
-            for (int i = 0; i < varDim(est.type(s)); ++i) v.value[static_cast<size_t>(i)] = est.data(s)[i];
+            v.type =
+                est.type(s) == VarType::Point3 ? io::VertexType::Point3 : io::VertexType::Point2;
+            for (int i = 0; i < varDim(est.type(s)); ++i)
+              v.value[static_cast<size_t>(i)] = est.data(s)[i];
             ds.landmarks.push_back(v);
           }
         }
         try {
           io::writeG2oVertices(c.argument, ds);
         } catch (const std::exception& e) {
-          commandError(c, E::COMMAND_FAILED, std::string("cannot write snapshot: ") + e.what(), m.channel);
+          commandError(c, E::COMMAND_FAILED, std::string("cannot write snapshot: ") + e.what(),
+                       m.channel);
           return;
         }
         publishStatus(c.request_id, false);
@@ -1445,7 +1508,9 @@ void Engine::handleCommand(const Inbound& m) {
         publishStatus(c.request_id, false);
         return;
       }
-      case C::REQUEST_STATUS: publishStatus(c.request_id, true); return;
+      case C::REQUEST_STATUS:
+        publishStatus(c.request_id, true);
+        return;
       case C::REQUEST_HYPOTHESES: {
         // Full snapshots of hypotheses rank 0..n−1 (estimate_t.hypothesis = rank), then a
         // status with the top min(n, MAX_HYPOTHESES) of them. Without mh: rank 0 only.
@@ -1458,10 +1523,10 @@ void Engine::handleCommand(const Inbound& m) {
             used = 0;
           }
           if (used != c.argument.size() || n < 1) {
-            commandError(c, E::COMMAND_FAILED,
-                         "argument must be \"\" or a number of hypotheses >= 1, not '" +
-                             c.argument + "'",
-                         m.channel);
+            commandError(
+                c, E::COMMAND_FAILED,
+                "argument must be \"\" or a number of hypotheses >= 1, not '" + c.argument + "'",
+                m.channel);
             return;
           }
         }
@@ -1476,7 +1541,8 @@ void Engine::handleCommand(const Inbound& m) {
         return;
       }
       default:
-        commandError(c, E::INVALID_FIELD, "unknown command " + std::to_string(c.command), m.channel);
+        commandError(c, E::INVALID_FIELD, "unknown command " + std::to_string(c.command),
+                     m.channel);
         return;
     }
   } catch (const std::exception& e) {

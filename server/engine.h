@@ -35,11 +35,11 @@
 
 #include "loopd/command_t.hpp"
 #include "loopd/factor_batch_t.hpp"
+#include "robust/per_factor_backend.h"
 #include "server/batch_validator.h"
 #include "server/journal.h"
 #include "server/publisher.h"
 #include "server/session_table.h"
-#include "robust/per_factor_backend.h"
 #include "solvers/backend/backend.h"
 
 namespace loopd::server {
@@ -53,7 +53,7 @@ struct EngineOptions {
   double priorInformation = 1e8;     // first-pose and root-anchor priors
   int maxMessageBytes = 256 * 1024;  // larger messages are refused before decoding
   double heartbeatSeconds = 1.0;
-  int maxHypotheses = 10;            // mh: live hypotheses at most (BackendOptions::maxHypotheses)
+  int maxHypotheses = 10;  // mh: live hypotheses at most (BackendOptions::maxHypotheses)
 };
 
 struct Inbound {
@@ -110,8 +110,8 @@ class Engine : private GraphView {
     Key firstPose = 0;
     std::int64_t latestIndex = -1;
     bool anchored = false;
-    std::uint32_t parent = 0;       // union-find parent (itself when root)
-    FactorId anchorPrior = 0;       // the anchor's prior factor (strong for a group root)
+    std::uint32_t parent = 0;  // union-find parent (itself when root)
+    FactorId anchorPrior = 0;  // the anchor's prior factor (strong for a group root)
   };
   struct Owner {
     std::string sender;
@@ -134,7 +134,7 @@ class Engine : private GraphView {
     Decoded d;
     BackendUpdate update;
     std::map<std::uint32_t, RobotInfo> robotsBefore;
-    std::vector<std::pair<std::int64_t, FactorId>> addedIds;    // sender ids → FactorIds
+    std::vector<std::pair<std::int64_t, FactorId>> addedIds;  // sender ids → FactorIds
     std::vector<std::pair<std::int64_t, FactorId>> removedIds;
     std::vector<Owner> owners;  // parallel to update.factors (sender id −1: server-owned)
     std::vector<Group> groups;  // parallel to update.ambiguous

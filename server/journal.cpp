@@ -1,8 +1,8 @@
 #include "server/journal.h"
 
+#include <unistd.h>
 #include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
-#include <unistd.h>
 
 namespace loopd::server {
 

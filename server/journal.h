@@ -34,10 +34,10 @@ class Journal {
 /// Reads every complete event of a log in order. Returns the number read; `validBytes` is the
 /// file offset after the last complete event (a kill -9 may have left a partial one behind,
 /// which the caller truncates before appending). Throws std::runtime_error if unreadable.
-std::int64_t readJournal(const std::string& path,
-                         const std::function<void(const std::string& channel, const void* data,
-                                                  int size)>& onEvent,
-                         long* validBytes = nullptr);
+std::int64_t readJournal(
+    const std::string& path,
+    const std::function<void(const std::string& channel, const void* data, int size)>& onEvent,
+    long* validBytes = nullptr);
 
 /// Cuts a file to `bytes` (drops a partial trailing event).
 bool truncateFile(const std::string& path, long bytes);

@@ -1,7 +1,7 @@
 #include "server/lcm_io.h"
 
-#include <lcm/lcm-cpp.hpp>
 #include <spdlog/spdlog.h>
+#include <lcm/lcm-cpp.hpp>
 
 namespace loopd::server {
 
@@ -19,7 +19,8 @@ LcmIo::~LcmIo() = default;
 bool LcmIo::good() const { return lcm_ && lcm_->good(); }
 
 void LcmIo::onMessage(const lcm::ReceiveBuffer* rbuf, const std::string& channel, LcmIo* self) {
-  self->handler_(channel, static_cast<const std::uint8_t*>(rbuf->data), static_cast<int>(rbuf->data_size));
+  self->handler_(channel, static_cast<const std::uint8_t*>(rbuf->data),
+                 static_cast<int>(rbuf->data_size));
 }
 
 void LcmIo::publish(const std::string& channel, const std::vector<std::uint8_t>& bytes) {

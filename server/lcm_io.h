@@ -13,13 +13,14 @@
 namespace lcm {
 class LCM;
 class ReceiveBuffer;
-}
+}  // namespace lcm
 
 namespace loopd::server {
 
 class LcmIo {
  public:
-  using Handler = std::function<void(const std::string& channel, const std::uint8_t* data, int size)>;
+  using Handler =
+      std::function<void(const std::string& channel, const std::uint8_t* data, int size)>;
   LcmIo(const std::string& url, const std::vector<std::string>& channels, Handler handler);
   ~LcmIo();
   bool good() const;

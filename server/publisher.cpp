@@ -6,7 +6,8 @@
 namespace loopd::server {
 
 Channels Channels::withPrefix(const std::string& p) {
-  return {p + "FACTORS", p + "COMMAND", p + "ESTIMATE", p + "COVARIANCE", p + "STATUS", p + "ERROR"};
+  return {p + "FACTORS",    p + "COMMAND", p + "ESTIMATE",
+          p + "COVARIANCE", p + "STATUS",  p + "ERROR"};
 }
 
 std::int64_t nowUtime() {
@@ -72,7 +73,8 @@ void Publisher::status(loopd::status_t m, const std::vector<loopd::loop_decision
     m.decisions_chunk_index = static_cast<std::int32_t>(c);
     m.decisions_chunk_count = static_cast<std::int32_t>(chunks);
     const size_t b = c * per, e = std::min(decisions.size(), b + per);
-    m.decisions.assign(decisions.begin() + static_cast<long>(b), decisions.begin() + static_cast<long>(e));
+    m.decisions.assign(decisions.begin() + static_cast<long>(b),
+                       decisions.begin() + static_cast<long>(e));
     m.num_decisions = static_cast<std::int16_t>(m.decisions.size());
     send(ch_.status, m);
   }

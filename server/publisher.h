@@ -19,7 +19,8 @@ struct Channels {
   static Channels withPrefix(const std::string& prefix);
 };
 
-using Sink = std::function<void(const std::string& channel, const std::vector<std::uint8_t>& bytes)>;
+using Sink =
+    std::function<void(const std::string& channel, const std::vector<std::uint8_t>& bytes)>;
 
 /// One robot's poses/landmarks to publish (already in the frame to publish in).
 struct RobotEstimate {

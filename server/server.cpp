@@ -15,12 +15,13 @@ namespace loopd::server {
 
 namespace {
 bool sameFile(const std::string& a, const std::string& b) {
-  struct stat sa{}, sb{};
+  struct stat sa {
+  }, sb{};
   if (::stat(a.c_str(), &sa) != 0 || ::stat(b.c_str(), &sb) != 0) return a == b;
   return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
 }
 bool exists(const std::string& p) {
-  struct stat s{};
+  struct stat s {};
   return ::stat(p.c_str(), &s) == 0;
 }
 }  // namespace
@@ -29,17 +30,23 @@ int runServer(const ServerConfig& cfg, const std::atomic<bool>& stop) {
   const Channels ch = Channels::withPrefix(cfg.channelPrefix);
   const std::string url = effectiveLcmUrl(cfg.lcmUrl);
   Engine* enginePtr = nullptr;
-  LcmIo io(url, {ch.factors, ch.command}, [&](const std::string& channel, const std::uint8_t* d, int n) {
-    if (enginePtr) enginePtr->post(Inbound{channel, std::vector<std::uint8_t>(d, d + n)});
-  });
+  LcmIo io(url, {ch.factors, ch.command},
+           [&](const std::string& channel, const std::uint8_t* d, int n) {
+             if (enginePtr) enginePtr->post(Inbound{channel, std::vector<std::uint8_t>(d, d + n)});
+           });
   if (!io.good()) {
-    spdlog::error("cannot open LCM at '{}' (is there a multicast route? see scripts/ensure-multicast.sh)", url);
+    spdlog::error(
+        "cannot open LCM at '{}' (is there a multicast route? see scripts/ensure-multicast.sh)",
+        url);
     return 1;
   }
-  Publisher pub(ch, [&](const std::string& channel, const std::vector<std::uint8_t>& b) { io.publish(channel, b); });
+  Publisher pub(ch, [&](const std::string& channel, const std::vector<std::uint8_t>& b) {
+    io.publish(channel, b);
+  });
 
   // Resume: replay first; then append to the journal (cutting a partial last event).
-  const bool resumeIntoJournal = !cfg.resume.empty() && !cfg.journal.empty() && sameFile(cfg.resume, cfg.journal);
+  const bool resumeIntoJournal =
+      !cfg.resume.empty() && !cfg.journal.empty() && sameFile(cfg.resume, cfg.journal);
   long validBytes = -1;
   std::unique_ptr<Journal> journal;
   EngineOptions eo;
@@ -63,13 +70,15 @@ int runServer(const ServerConfig& cfg, const std::atomic<bool>& stop) {
     } else {
       try {
         const auto t0 = std::chrono::steady_clock::now();
-        const std::int64_t n = engine.replay(cfg.resume, /*rejournal=*/journal != nullptr, &validBytes);
+        const std::int64_t n =
+            engine.replay(cfg.resume, /*rejournal=*/journal != nullptr, &validBytes);
         const auto c = engine.counters();
-        spdlog::info("resumed {} events from {} in {:.2f} s: {} batches accepted, {} poses, chi2 {:.9g}", n,
-                     cfg.resume,
-                     std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
-                     c.accepted, engine.backend().estimate().size(),
-                     engine.backend().graph().empty() ? 0.0 : engine.backend().chi2());
+        spdlog::info(
+            "resumed {} events from {} in {:.2f} s: {} batches accepted, {} poses, chi2 {:.9g}", n,
+            cfg.resume,
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+            c.accepted, engine.backend().estimate().size(),
+            engine.backend().graph().empty() ? 0.0 : engine.backend().chi2());
       } catch (const std::exception& e) {
         spdlog::error("--resume {}: {}", cfg.resume, e.what());
         return 1;
@@ -91,9 +100,11 @@ int runServer(const ServerConfig& cfg, const std::atomic<bool>& stop) {
   }
   e->setJournal(journal.get());
   enginePtr = e;
-  spdlog::info("loopd: solver {}, LCM {}, channels {}FACTORS/{}COMMAND -> ESTIMATE/COVARIANCE/STATUS/ERROR{}",
-               engine.backend().name(), url, cfg.channelPrefix, cfg.channelPrefix,
-               journal ? ", journal " + cfg.journal : std::string());
+  spdlog::info(
+      "loopd: solver {}, LCM {}, channels {}FACTORS/{}COMMAND -> "
+      "ESTIMATE/COVARIANCE/STATUS/ERROR{}",
+      engine.backend().name(), url, cfg.channelPrefix, cfg.channelPrefix,
+      journal ? ", journal " + cfg.journal : std::string());
 
   std::atomic<bool> ioStop{false};
   std::thread ioThread([&] { io.run(ioStop); });
@@ -104,8 +115,9 @@ int runServer(const ServerConfig& cfg, const std::atomic<bool>& stop) {
   engine.step();
   if (journal) journal->flush();
   const auto c = engine.counters();
-  spdlog::info("loopd: stopped; {} batches accepted, {} rejected, {} duplicate, {} expired, {} journaled",
-               c.accepted, c.rejected, c.duplicate, c.expired, c.journaled);
+  spdlog::info(
+      "loopd: stopped; {} batches accepted, {} rejected, {} duplicate, {} expired, {} journaled",
+      c.accepted, c.rejected, c.duplicate, c.expired, c.journaled);
   return 0;
 }
 

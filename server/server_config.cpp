@@ -19,9 +19,9 @@ std::string trim(const std::string& s) {
   return s.substr(b, e - b + 1);
 }
 
-const char* const kKeys[] = {"lcm-url", "solver", "channel-prefix", "journal", "resume",
-                             "publish-every", "log-level", "hold-seconds", "hold-max",
-                             "idle-seconds", "max-hypotheses", "config"};
+const char* const kKeys[] = {"lcm-url",  "solver",        "channel-prefix", "journal",
+                             "resume",   "publish-every", "log-level",      "hold-seconds",
+                             "hold-max", "idle-seconds",  "max-hypotheses", "config"};
 
 bool knownKey(const std::string& k) {
   for (const char* x : kKeys)
@@ -50,17 +50,28 @@ int toInt(const std::string& k, const std::string& v) {
 }
 
 void apply(ServerConfig& c, const std::string& k, const std::string& v) {
-  if (k == "lcm-url") c.lcmUrl = v;
-  else if (k == "solver") c.solver = v;
-  else if (k == "channel-prefix") c.channelPrefix = v;
-  else if (k == "journal") c.journal = v;
-  else if (k == "resume") c.resume = v;
-  else if (k == "publish-every") c.publishEvery = toInt(k, v);
-  else if (k == "log-level") c.logLevel = v;
-  else if (k == "hold-seconds") c.holdSeconds = toDouble(k, v);
-  else if (k == "hold-max") c.holdMax = toInt(k, v);
-  else if (k == "idle-seconds") c.idleSeconds = toDouble(k, v);
-  else if (k == "max-hypotheses") c.maxHypotheses = toInt(k, v);
+  if (k == "lcm-url")
+    c.lcmUrl = v;
+  else if (k == "solver")
+    c.solver = v;
+  else if (k == "channel-prefix")
+    c.channelPrefix = v;
+  else if (k == "journal")
+    c.journal = v;
+  else if (k == "resume")
+    c.resume = v;
+  else if (k == "publish-every")
+    c.publishEvery = toInt(k, v);
+  else if (k == "log-level")
+    c.logLevel = v;
+  else if (k == "hold-seconds")
+    c.holdSeconds = toDouble(k, v);
+  else if (k == "hold-max")
+    c.holdMax = toInt(k, v);
+  else if (k == "idle-seconds")
+    c.idleSeconds = toDouble(k, v);
+  else if (k == "max-hypotheses")
+    c.maxHypotheses = toInt(k, v);
 }
 
 void loadFile(ServerConfig& c, const std::string& path) {
@@ -115,8 +126,10 @@ ServerConfig parseServerConfig(const std::vector<std::string>& args) {
     if (k == "config") loadFile(c, v);
   for (const auto& [k, v] : flags) apply(c, k, v);
   if (c.solver.empty()) c.solver = defaultSolver();
-  if (!isBackendName(c.solver)) throw std::invalid_argument("--solver: unknown solver '" + c.solver + "'");
-  if (c.channelPrefix.size() > 53) throw std::invalid_argument("--channel-prefix: at most 53 characters");
+  if (!isBackendName(c.solver))
+    throw std::invalid_argument("--solver: unknown solver '" + c.solver + "'");
+  if (c.channelPrefix.size() > 53)
+    throw std::invalid_argument("--channel-prefix: at most 53 characters");
   if (c.publishEvery < 0) throw std::invalid_argument("--publish-every must be >= 0");
   if (c.maxHypotheses < 1) throw std::invalid_argument("--max-hypotheses must be >= 1");
   if (c.holdMax < 0 || c.holdSeconds < 0 || c.idleSeconds < 0)
@@ -128,15 +141,21 @@ std::string effectiveLcmUrl(const std::string& url) { return lcmReceiveUrl(url);
 
 std::string serverUsage() {
   return "usage: loopd [flags]\n"
-         "  --lcm-url URL         LCM provider (default: LCM_DEFAULT_URL or udpm://239.255.76.67:7667?ttl=0;\n"
+         "  --lcm-url URL         LCM provider (default: LCM_DEFAULT_URL or "
+         "udpm://239.255.76.67:7667?ttl=0;\n"
          "                        recv_buf_size=4194304 is added to udpm URLs without one)\n"
-         "  --solver NAME         back-end variant (default: " + defaultSolver() + ")\n"
+         "  --solver NAME         back-end variant (default: " +
+         defaultSolver() +
+         ")\n"
          "  --channel-prefix P    channel prefix (default LOOPD_): P FACTORS, COMMAND in;\n"
          "                        ESTIMATE, COVARIANCE, STATUS, ERROR out\n"
          "  --journal FILE        append every accepted batch to this LCM log\n"
-         "  --resume FILE         replay this journal at start-up (keeps appending if --journal is the same)\n"
-         "  --publish-every N     full estimate snapshot every N updates (default 50; 0 = only on request)\n"
-         "  --hold-seconds S      how long a batch may wait for a pose not yet introduced (default 30)\n"
+         "  --resume FILE         replay this journal at start-up (keeps appending if --journal is "
+         "the same)\n"
+         "  --publish-every N     full estimate snapshot every N updates (default 50; 0 = only on "
+         "request)\n"
+         "  --hold-seconds S      how long a batch may wait for a pose not yet introduced (default "
+         "30)\n"
          "  --hold-max N          at most N held batches (default 1000)\n"
          "  --idle-seconds S      input pause before iterating to convergence (default 0.5)\n"
          "  --max-hypotheses K    mh: live hypotheses kept at most (default 10)\n"

@@ -7,17 +7,17 @@
 namespace loopd::server {
 
 struct ServerConfig {
-  std::string lcmUrl;                  // "" = LCM's default (LCM_DEFAULT_URL or udpm 239.255.76.67:7667)
-  std::string solver;                  // "" = isam2 if registered, else lm
+  std::string lcmUrl;  // "" = LCM's default (LCM_DEFAULT_URL or udpm 239.255.76.67:7667)
+  std::string solver;  // "" = isam2 if registered, else lm
   std::string channelPrefix = "LOOPD_";
-  std::string journal;                 // append every accepted batch here
-  std::string resume;                  // replay this journal at start-up
+  std::string journal;  // append every accepted batch here
+  std::string resume;   // replay this journal at start-up
   int publishEvery = 50;
   std::string logLevel = "info";
   double holdSeconds = 30.0;
   int holdMax = 1000;
   double idleSeconds = 0.5;
-  int maxHypotheses = 10;              // mh: live hypotheses at most (K)
+  int maxHypotheses = 10;  // mh: live hypotheses at most (K)
   bool help = false;
 };
 

@@ -43,8 +43,8 @@ class SessionTable {
 
  private:
   struct Sender {
-    std::int64_t lastContiguous = 0;   // 1..lastContiguous all received
-    std::set<std::int64_t> above;      // received beyond lastContiguous
+    std::int64_t lastContiguous = 0;  // 1..lastContiguous all received
+    std::set<std::int64_t> above;     // received beyond lastContiguous
     std::unordered_map<std::int64_t, FactorId> live;
     std::unordered_set<std::int64_t> used;
   };

@@ -9,17 +9,30 @@ using F = loopd::factor_t;
 
 int factorDim(int type) {
   switch (type) {
-    case F::PRIOR_SE2: case F::BETWEEN_SE2: case F::PRIOR_POINT3: case F::POSE_POINT3: return 3;
-    case F::PRIOR_SE3: case F::BETWEEN_SE3: return 6;
-    case F::PRIOR_POINT2: case F::POSE_POINT2: case F::BEARING_RANGE2: return 2;
-    default: return 0;
+    case F::PRIOR_SE2:
+    case F::BETWEEN_SE2:
+    case F::PRIOR_POINT3:
+    case F::POSE_POINT3:
+      return 3;
+    case F::PRIOR_SE3:
+    case F::BETWEEN_SE3:
+      return 6;
+    case F::PRIOR_POINT2:
+    case F::POSE_POINT2:
+    case F::BEARING_RANGE2:
+      return 2;
+    default:
+      return 0;
   }
 }
 
 int measurementSize(int type) {
   switch (type) {
-    case F::PRIOR_SE3: case F::BETWEEN_SE3: return 7;
-    default: return factorDim(type);
+    case F::PRIOR_SE3:
+    case F::BETWEEN_SE3:
+      return 7;
+    default:
+      return factorDim(type);
   }
 }
 
@@ -30,30 +43,46 @@ int keyCount(int type) {
 }
 
 std::string factorTypeName(int type) {
-  static const char* names[] = {"?", "PRIOR_SE2", "PRIOR_SE3", "PRIOR_POINT2", "PRIOR_POINT3",
-                                "BETWEEN_SE2", "BETWEEN_SE3", "POSE_POINT2", "POSE_POINT3",
-                                "BEARING_RANGE2"};
+  static const char* names[] = {
+      "?",           "PRIOR_SE2",   "PRIOR_SE3",   "PRIOR_POINT2", "PRIOR_POINT3",
+      "BETWEEN_SE2", "BETWEEN_SE3", "POSE_POINT2", "POSE_POINT3",  "BEARING_RANGE2"};
   if (type >= 1 && type <= 9) return names[type];
   return "type " + std::to_string(type);
 }
 
 bool slotIsPose(int type, int slot) {
   switch (type) {
-    case F::PRIOR_POINT2: case F::PRIOR_POINT3: return false;
-    case F::POSE_POINT2: case F::POSE_POINT3: case F::BEARING_RANGE2: return slot == 0;
-    default: return true;
+    case F::PRIOR_POINT2:
+    case F::PRIOR_POINT3:
+      return false;
+    case F::POSE_POINT2:
+    case F::POSE_POINT3:
+    case F::BEARING_RANGE2:
+      return slot == 0;
+    default:
+      return true;
   }
 }
 
 VarType slotVarType(int type, int slot) {
   switch (type) {
-    case F::PRIOR_SE2: case F::BETWEEN_SE2: return VarType::SE2;
-    case F::PRIOR_SE3: case F::BETWEEN_SE3: return VarType::SE3;
-    case F::PRIOR_POINT2: return VarType::Point2;
-    case F::PRIOR_POINT3: return VarType::Point3;
-    case F::POSE_POINT2: case F::BEARING_RANGE2: return slot == 0 ? VarType::SE2 : VarType::Point2;
-    case F::POSE_POINT3: return slot == 0 ? VarType::SE3 : VarType::Point3;
-    default: return VarType::Scalar;
+    case F::PRIOR_SE2:
+    case F::BETWEEN_SE2:
+      return VarType::SE2;
+    case F::PRIOR_SE3:
+    case F::BETWEEN_SE3:
+      return VarType::SE3;
+    case F::PRIOR_POINT2:
+      return VarType::Point2;
+    case F::PRIOR_POINT3:
+      return VarType::Point3;
+    case F::POSE_POINT2:
+    case F::BEARING_RANGE2:
+      return slot == 0 ? VarType::SE2 : VarType::Point2;
+    case F::POSE_POINT3:
+      return slot == 0 ? VarType::SE3 : VarType::Point3;
+    default:
+      return VarType::Scalar;
   }
 }
 
@@ -72,7 +101,9 @@ loopd::key_t toWireKey(Key k) {
 }
 
 std::string wireKeyName(const loopd::key_t& k) {
-  const char* kind = k.kind == loopd::key_t::POSE ? "x" : k.kind == loopd::key_t::LANDMARK ? "l" : "?";
+  const char* kind = k.kind == loopd::key_t::POSE       ? "x"
+                     : k.kind == loopd::key_t::LANDMARK ? "l"
+                                                        : "?";
   return "r" + std::to_string(k.robot) + ":" + kind + std::to_string(k.index);
 }
 
@@ -96,9 +127,8 @@ Eigen::MatrixXd informationOf(const loopd::factor_t& f) {
 }
 
 const std::vector<std::string>& robustNames() {
-  static const std::vector<std::string> names = {"",   "none", "huber",  "cauchy",  "gm",
-                                                 "dcs", "sc",  "mm",     "gnc-gm", "gnc-tls",
-                                                 "risam"};
+  static const std::vector<std::string> names = {"",   "none", "huber",  "cauchy",  "gm",   "dcs",
+                                                 "sc", "mm",   "gnc-gm", "gnc-tls", "risam"};
   return names;
 }
 

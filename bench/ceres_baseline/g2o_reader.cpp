@@ -54,7 +54,8 @@ double parse_double(Tokens& tk, const char* what) {
   const double v = std::strtod(tok.c_str(), &end);
   if (end == tok.c_str() || *end != '\0')
     throw LineError{std::string("field '") + what + "' is not a number: '" + tok + "'"};
-  if (!std::isfinite(v)) throw LineError{std::string("field '") + what + "' is not finite: '" + tok + "'"};
+  if (!std::isfinite(v))
+    throw LineError{std::string("field '") + what + "' is not finite: '" + tok + "'"};
   return v;
 }
 
@@ -130,8 +131,8 @@ bool read_g2o(const std::string& path, Graph& g, std::string& err) {
       ++lineno;
       if (!line.empty() && line.back() == '\r') line.pop_back();
       Tokens tk(line);
-      if (!tk.next(tag)) continue;     // blank line
-      if (tag[0] == '#') continue;     // comment
+      if (!tk.next(tag)) continue;  // blank line
+      if (tag[0] == '#') continue;  // comment
       if (tag == "VERTEX_SE2") {
         set_dim(2);
         const long long id = parse_id(tk, "id");
@@ -139,7 +140,8 @@ bool read_g2o(const std::string& path, Graph& g, std::string& err) {
         v[0] = parse_double(tk, "x");
         v[1] = parse_double(tk, "y");
         v[2] = parse_double(tk, "theta");
-        if (!verts.emplace(id, v).second) throw LineError{"duplicate vertex id " + std::to_string(id)};
+        if (!verts.emplace(id, v).second)
+          throw LineError{"duplicate vertex id " + std::to_string(id)};
       } else if (tag == "VERTEX_SE3:QUAT") {
         set_dim(3);
         const long long id = parse_id(tk, "id");
@@ -148,8 +150,12 @@ bool read_g2o(const std::string& path, Graph& g, std::string& err) {
         v[1] = parse_double(tk, "y");
         v[2] = parse_double(tk, "z");
         const Eigen::Quaterniond q = parse_quat(tk);
-        v[3] = q.x(); v[4] = q.y(); v[5] = q.z(); v[6] = q.w();
-        if (!verts.emplace(id, v).second) throw LineError{"duplicate vertex id " + std::to_string(id)};
+        v[3] = q.x();
+        v[4] = q.y();
+        v[5] = q.z();
+        v[6] = q.w();
+        if (!verts.emplace(id, v).second)
+          throw LineError{"duplicate vertex id " + std::to_string(id)};
       } else if (tag == "EDGE_SE2") {
         set_dim(2);
         RawEdge r{parse_id(tk, "from"), parse_id(tk, "to"), lineno};
@@ -174,7 +180,8 @@ bool read_g2o(const std::string& path, Graph& g, std::string& err) {
         g.e3.push_back(e);
         raw.push_back(r);
       } else {
-        throw LineError{"unknown tag '" + tag + "' (this reader knows VERTEX_SE2, EDGE_SE2, "
+        throw LineError{"unknown tag '" + tag +
+                        "' (this reader knows VERTEX_SE2, EDGE_SE2, "
                         "VERTEX_SE3:QUAT, EDGE_SE3:QUAT)"};
       }
       if (!tk.at_end()) throw LineError{"unexpected extra fields after the " + tag + " record"};
@@ -197,15 +204,16 @@ bool read_g2o(const std::string& path, Graph& g, std::string& err) {
     for (const RawEdge& r : raw)
       for (long long id : {r.a, r.b})
         if (!verts.count(id)) {
-          err = path + ":" + std::to_string(r.line) + ": edge refers to vertex " + std::to_string(id) +
-                " which the file does not define";
+          err = path + ":" + std::to_string(r.line) + ": edge refers to vertex " +
+                std::to_string(id) + " which the file does not define";
           return false;
         }
   } else {
     // Edges only: the vertex set is the set of endpoints, initialised by composing odometry
     // i -> i+1 from the lowest id at the identity.
     std::map<std::pair<long long, long long>, std::size_t> first_edge;  // (a,b) -> edge index
-    for (std::size_t k = 0; k < raw.size(); ++k) first_edge.emplace(std::make_pair(raw[k].a, raw[k].b), k);
+    for (std::size_t k = 0; k < raw.size(); ++k)
+      first_edge.emplace(std::make_pair(raw[k].a, raw[k].b), k);
     std::vector<long long> ids;
     for (const RawEdge& r : raw) {
       ids.push_back(r.a);
@@ -219,8 +227,9 @@ bool read_g2o(const std::string& path, Graph& g, std::string& err) {
     for (std::size_t k = 0; k + 1 < ids.size(); ++k) {
       const long long a = ids[k], b = ids[k + 1];
       if (b != a + 1) {
-        err = path + ": no vertices in the file and the edge ids are not consecutive (" + std::to_string(a) +
-              " then " + std::to_string(b) + "): cannot initialise by composing odometry";
+        err = path + ": no vertices in the file and the edge ids are not consecutive (" +
+              std::to_string(a) + " then " + std::to_string(b) +
+              "): cannot initialise by composing odometry";
         return false;
       }
       bool reversed = false;
@@ -230,8 +239,8 @@ bool read_g2o(const std::string& path, Graph& g, std::string& err) {
         reversed = true;
       }
       if (it == first_edge.end()) {
-        err = path + ": no vertices in the file and no odometry edge between " + std::to_string(a) + " and " +
-              std::to_string(b) + ": cannot initialise by composing odometry";
+        err = path + ": no vertices in the file and no odometry edge between " + std::to_string(a) +
+              " and " + std::to_string(b) + ": cannot initialise by composing odometry";
         return false;
       }
       if (g.dim == 2) {

@@ -25,9 +25,9 @@ struct Edge3 {
 };
 
 struct Graph {
-  int dim = 0;                // 2 or 3 (0: empty file)
-  bool had_vertices = false;  // false: initial values composed from odometry
-  std::vector<long long> ids; // vertex ids, ascending; index = position
+  int dim = 0;                 // 2 or 3 (0: empty file)
+  bool had_vertices = false;   // false: initial values composed from odometry
+  std::vector<long long> ids;  // vertex ids, ascending; index = position
   // SE(2) state, one entry per vertex (parameter blocks for Ceres)
   std::vector<std::array<double, 2>> xy;
   std::vector<double> th;

@@ -43,7 +43,8 @@ void single_threaded_libraries(char** argv) {
     execv("/proc/self/exe", argv);  // returns only on failure
   }
   using SetFn = void (*)(int);
-  for (const char* name : {"openblas_set_num_threads", "goto_set_num_threads", "omp_set_num_threads"})
+  for (const char* name :
+       {"openblas_set_num_threads", "goto_set_num_threads", "omp_set_num_threads"})
     if (void* f = dlsym(RTLD_DEFAULT, name)) reinterpret_cast<SetFn>(f)(1);
 }
 
@@ -103,7 +104,8 @@ void build_problem(cb::Graph& g, ceres::Problem& problem) {
     for (const cb::Edge2& e : g.e2) {
       auto* cost = new ceres::AutoDiffCostFunction<cb::Se2Residual, 3, 2, 1, 2, 1>(
           new cb::Se2Residual{e.dx, e.dy, e.dth, e.sqrt_info});
-      problem.AddResidualBlock(cost, nullptr, g.xy[e.i].data(), &g.th[e.i], g.xy[e.j].data(), &g.th[e.j]);
+      problem.AddResidualBlock(cost, nullptr, g.xy[e.i].data(), &g.th[e.i], g.xy[e.j].data(),
+                               &g.th[e.j]);
     }
     // θ is kept in [-π, π) as in Ceres's own pose_graph_2d example; the residual wraps too.
     ceres::Manifold* angle = new AngleManifold;  // owned by the problem
@@ -137,11 +139,16 @@ void build_problem(cb::Graph& g, ceres::Problem& problem) {
 
 const char* termination_name(ceres::TerminationType t) {
   switch (t) {
-    case ceres::CONVERGENCE: return "CONVERGENCE";
-    case ceres::NO_CONVERGENCE: return "NO_CONVERGENCE";
-    case ceres::FAILURE: return "FAILURE";
-    case ceres::USER_SUCCESS: return "USER_SUCCESS";
-    case ceres::USER_FAILURE: return "USER_FAILURE";
+    case ceres::CONVERGENCE:
+      return "CONVERGENCE";
+    case ceres::NO_CONVERGENCE:
+      return "NO_CONVERGENCE";
+    case ceres::FAILURE:
+      return "FAILURE";
+    case ceres::USER_SUCCESS:
+      return "USER_SUCCESS";
+    case ceres::USER_FAILURE:
+      return "USER_FAILURE";
   }
   return "FAILURE";
 }
@@ -172,7 +179,8 @@ std::string json_number(double v, int digits) {
 }
 
 std::string dataset_name(const std::string& path) {
-  std::string base = path.substr(path.find_last_of('/') == std::string::npos ? 0 : path.find_last_of('/') + 1);
+  std::string base =
+      path.substr(path.find_last_of('/') == std::string::npos ? 0 : path.find_last_of('/') + 1);
   const std::size_t dot = base.find_last_of('.');
   if (dot != std::string::npos && dot > 0) base.resize(dot);
   return base;
@@ -295,7 +303,8 @@ int main(int argc, char** argv) {
                 std::max(0, summary.num_successful_steps - 1), summary.num_unsuccessful_steps);
     std::printf("initial_chi2  %.10g\n", initial_chi2);
     std::printf("final_chi2    %.10g\n", final_chi2);
-    std::printf("termination   %s (%s)\n", termination_name(summary.termination_type), summary.message.c_str());
+    std::printf("termination   %s (%s)\n", termination_name(summary.termination_type),
+                summary.message.c_str());
   }
   // A completed solve exits 0 whatever its termination (the bench reads `termination`; a
   // peer's time to failure still counts). Non-zero exits are for bad input or usage only.

@@ -36,7 +36,8 @@ Eigen::Matrix<T, 3, 1> log_so3(const Eigen::Quaternion<T>& q_in) {
   if (n2 < T(1e-4) * w * w) {
     // θ = 2·atan(n/w); φ = v·θ/n = v·(2/w)·(1 − s/3 + s²/5 − s³/7), s = n²/w²  (error ~ s⁴/9)
     const T s = n2 / (w * w);
-    const T f = (T(2.0) / w) * (T(1.0) - s * (T(1.0 / 3.0) - s * (T(1.0 / 5.0) - s * T(1.0 / 7.0))));
+    const T f =
+        (T(2.0) / w) * (T(1.0) - s * (T(1.0 / 3.0) - s * (T(1.0 / 5.0) - s * T(1.0 / 7.0))));
     return v * f;
   }
   const T n = sqrt(n2);
@@ -46,7 +47,8 @@ Eigen::Matrix<T, 3, 1> log_so3(const Eigen::Quaternion<T>& q_in) {
 
 // ρ = V(φ)⁻¹·t with V⁻¹ = I − ½[φ]× + c(θ)·[φ]×², c = (1 − (θ/2)·cot(θ/2)) / θ².
 template <typename T>
-Eigen::Matrix<T, 3, 1> inv_left_jacobian_times(const Eigen::Matrix<T, 3, 1>& phi, const Eigen::Matrix<T, 3, 1>& t) {
+Eigen::Matrix<T, 3, 1> inv_left_jacobian_times(const Eigen::Matrix<T, 3, 1>& phi,
+                                               const Eigen::Matrix<T, 3, 1>& t) {
   using std::cos;
   using std::sin;
   using std::sqrt;
@@ -54,7 +56,8 @@ Eigen::Matrix<T, 3, 1> inv_left_jacobian_times(const Eigen::Matrix<T, 3, 1>& phi
   T c;
   if (th2 < T(1e-2)) {
     // 1/12 + θ²/720 + θ⁴/30240 + θ⁶/1209600 (next term θ⁸/47900160 < 3e-19 here)
-    c = T(1.0 / 12.0) + th2 * (T(1.0 / 720.0) + th2 * (T(1.0 / 30240.0) + th2 * T(1.0 / 1209600.0)));
+    c = T(1.0 / 12.0) +
+        th2 * (T(1.0 / 720.0) + th2 * (T(1.0 / 30240.0) + th2 * T(1.0 / 1209600.0)));
   } else {
     const T th = sqrt(th2);
     const T h = T(0.5) * th;

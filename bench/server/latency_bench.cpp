@@ -30,7 +30,8 @@ namespace {
 
 const char* kUsage =
     "usage: loopd-latency-bench | loopd-throughput-bench [flags]\n"
-    "  --mode latency|throughput   (default: " LOOPD_BENCH_DEFAULT_MODE ")\n"
+    "  --mode latency|throughput   (default: " LOOPD_BENCH_DEFAULT_MODE
+    ")\n"
     "  --dataset FILE      default ../shared/datasets/city10000.g2o\n"
     "  --rate HZ           poses per second (latency default 10; throughput default 0 = flat out)\n"
     "  --poses N           only the first N poses (latency default 600; throughput: all)\n"
@@ -42,12 +43,16 @@ const char* kUsage =
     "  --server-arg ARG    extra argument for the started server (repeatable)\n"
     "  --channel-prefix P  default LOOPD_\n"
     "  --drain-seconds S   wait for outstanding estimates after the last batch (default 15)\n"
-    "  --offline-solve EXE loopd-solve for the throughput comparison (default <build>/tools/loopd-solve)\n"
+    "  --offline-solve EXE loopd-solve for the throughput comparison (default "
+    "<build>/tools/loopd-solve)\n"
     "  --no-offline        skip the offline comparison\n"
     "  --json FILE         write the results as JSON\n"
-    "  --csv FILE          latency: one line per pose (step, id, sent_s, latency_ms, server_ms, update_seq)\n"
-    "  --warmup N          latency: leave the first N poses out of the percentiles (default 1: the\n"
-    "                      session's first batch, which pays the server's cold start; reported apart)\n"
+    "  --csv FILE          latency: one line per pose (step, id, sent_s, latency_ms, server_ms, "
+    "update_seq)\n"
+    "  --warmup N          latency: leave the first N poses out of the percentiles (default 1: "
+    "the\n"
+    "                      session's first batch, which pays the server's cold start; reported "
+    "apart)\n"
     "  --label TEXT        free text stored in the JSON\n";
 
 struct OfflineResult {
@@ -62,12 +67,13 @@ double jsonNumber(const std::string& text, const std::string& key) {
   return std::strtod(text.c_str() + p + key.size() + 3, nullptr);
 }
 
-OfflineResult runOffline(const std::string& exe, const std::string& dataset, const std::string& solver,
-                         const std::string& tmpBase) {
+OfflineResult runOffline(const std::string& exe, const std::string& dataset,
+                         const std::string& solver, const std::string& tmpBase) {
   OfflineResult r;
   const std::string stats = tmpBase + "-offline.json";
-  const std::string cmd = "'" + exe + "' '" + dataset + "' --solver " + solver + " --incremental --quiet --stats '" +
-                          stats + "' > '" + tmpBase + "-offline.log' 2>&1";
+  const std::string cmd = "'" + exe + "' '" + dataset + "' --solver " + solver +
+                          " --incremental --quiet --stats '" + stats + "' > '" + tmpBase +
+                          "-offline.log' 2>&1";
   std::fprintf(stderr, "offline: %s\n", cmd.c_str());
   if (std::system(cmd.c_str()) != 0) return r;
   std::ifstream in(stats);
@@ -82,7 +88,8 @@ OfflineResult runOffline(const std::string& exe, const std::string& dataset, con
 
 int run(const Args& a) {
   const std::string mode = a.get("mode", LOOPD_BENCH_DEFAULT_MODE);
-  if (mode != "latency" && mode != "throughput") throw std::invalid_argument("--mode latency|throughput");
+  if (mode != "latency" && mode != "throughput")
+    throw std::invalid_argument("--mode latency|throughput");
   const bool thr = mode == "throughput";
   const std::string dataset = a.get("dataset", kDatasetsDir + "/city10000.g2o");
   const double rate = a.num("rate", thr ? 0.0 : 10.0);
@@ -102,18 +109,23 @@ int run(const Args& a) {
   const Schedule sched = buildSchedule(ds, robots, robots > 1, poses);
   const size_t n = sched.steps.size();
   std::fprintf(stderr, "%s: %s, %zu poses, %d robot(s), rate %s, solver %s, LCM %s\n", mode.c_str(),
-               dataset.c_str(), n, sched.robots, rate > 0 ? (std::to_string(rate) + " Hz").c_str() : "flat out",
-               solver.c_str(), url.c_str());
+               dataset.c_str(), n, sched.robots,
+               rate > 0 ? (std::to_string(rate) + " Hz").c_str() : "flat out", solver.c_str(),
+               url.c_str());
 
   Monitor mon(url, prefix);
   ServerProcess server;
   std::vector<std::string> extra = a.serverArgs;
   extra.insert(extra.begin(), {"--solver", solver});
   const std::string serverLog = tmpBase + "-loopd.log";
-  if (!connect) startServer(server, mon, a.get("server", kBinaryDir + "/server/loopd"), url, prefix, extra, serverLog);
-  else if (!mon.command(loopd::command_t::RESET, 15.0)) throw std::runtime_error("no server answered RESET on " + url);
+  if (!connect)
+    startServer(server, mon, a.get("server", kBinaryDir + "/server/loopd"), url, prefix, extra,
+                serverLog);
+  else if (!mon.command(loopd::command_t::RESET, 15.0))
+    throw std::runtime_error("no server answered RESET on " + url);
   loopd::status_t before{};
-  if (!mon.command(loopd::command_t::REQUEST_STATUS, 10.0, &before)) throw std::runtime_error("no status from server");
+  if (!mon.command(loopd::command_t::REQUEST_STATUS, 10.0, &before))
+    throw std::runtime_error("no status from server");
   mon.expect(sched);
   mon.resetConverged();
   const double loadStart = loadAverage1();
@@ -123,23 +135,29 @@ int run(const Args& a) {
   std::vector<std::unique_ptr<client::FactorPublisher>> pubs;
   const std::string senderBase = "bench" + std::to_string(getpid()) + "_";
   for (int r = 0; r < sched.robots; ++r)
-    pubs.push_back(std::make_unique<client::FactorPublisher>(pubLcm, senderBase + std::to_string(r), prefix + "FACTORS"));
+    pubs.push_back(std::make_unique<client::FactorPublisher>(pubLcm, senderBase + std::to_string(r),
+                                                             prefix + "FACTORS"));
 
   const auto t0 = Clock::now();
   for (size_t i = 0; i < n; ++i) {
-    if (rate > 0) std::this_thread::sleep_until(t0 + std::chrono::microseconds(static_cast<std::int64_t>(i * 1e6 / rate)));
+    if (rate > 0)
+      std::this_thread::sleep_until(
+          t0 + std::chrono::microseconds(static_cast<std::int64_t>(i * 1e6 / rate)));
     const Step& st = sched.steps[i];
     mon.markSent(i);
     publishStep(*pubs[static_cast<size_t>(st.robot)], st, sched.is3d);
-    if (!server.alive() && !connect) throw std::runtime_error("loopd died during the feed (log: " + serverLog + ")");
+    if (!server.alive() && !connect)
+      throw std::runtime_error("loopd died during the feed (log: " + serverLog + ")");
   }
   const auto tLastSent = Clock::now();
   std::int64_t sent = 0;
   for (auto& p : pubs) sent += p->batchesPublished();
-  std::fprintf(stderr, "published %lld batches in %.2f s; waiting for estimates\n", static_cast<long long>(sent),
-               secondsSince(t0, tLastSent));
-  const auto drainEnd = Clock::now() + std::chrono::duration<double>(thr ? std::max(drain, 300.0) : drain);
-  while (mon.seenCount() < n && Clock::now() < drainEnd) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  std::fprintf(stderr, "published %lld batches in %.2f s; waiting for estimates\n",
+               static_cast<long long>(sent), secondsSince(t0, tLastSent));
+  const auto drainEnd =
+      Clock::now() + std::chrono::duration<double>(thr ? std::max(drain, 300.0) : drain);
+  while (mon.seenCount() < n && Clock::now() < drainEnd)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
 
   const std::vector<PoseTiming> tm = mon.timings();
   std::vector<double> lat, srv;
@@ -183,44 +201,72 @@ int run(const Args& a) {
     if (g.sender.rfind(senderBase, 0) == 0) gapMissing += g.missing;
 
   Json j;
-  j.str("bench", mode).str("dataset", dataset).str("solver", solver).str("lcm_url", url).integer("poses", static_cast<long long>(n));
+  j.str("bench", mode)
+      .str("dataset", dataset)
+      .str("solver", solver)
+      .str("lcm_url", url)
+      .integer("poses", static_cast<long long>(n));
   j.integer("robots", sched.robots).num("rate_hz", rate).integer("batches_sent", sent);
-  j.integer("batches_accepted", accepted).integer("lost_batches", lost)
+  j.integer("batches_accepted", accepted)
+      .integer("lost_batches", lost)
       .integer("batches_rejected", after.batches_rejected - before.batches_rejected)
       .integer("batches_duplicate", after.batches_duplicate - before.batches_duplicate)
       .integer("batches_expired", after.batches_expired - before.batches_expired)
-      .integer("batches_held_at_end", after.batches_held).integer("sequence_gaps_missing", gapMissing)
-      .integer("unseen_poses", static_cast<long long>(unseen)).integer("status_ok", gotStatus ? 1 : 0);
-  j.num("publish_s", secondsSince(t0, tLastSent)).num("load_avg_1m_start", loadStart).num("load_avg_1m_end", loadEnd);
-  j.integer("server_rss_kb_end", rss).integer("server_hwm_kb", hwm).integer("server_exit", serverExit);
-  j.num("server_chi2", after.chi2).integer("server_poses", after.poses).integer("server_updates", after.update_seq);
+      .integer("batches_held_at_end", after.batches_held)
+      .integer("sequence_gaps_missing", gapMissing)
+      .integer("unseen_poses", static_cast<long long>(unseen))
+      .integer("status_ok", gotStatus ? 1 : 0);
+  j.num("publish_s", secondsSince(t0, tLastSent))
+      .num("load_avg_1m_start", loadStart)
+      .num("load_avg_1m_end", loadEnd);
+  j.integer("server_rss_kb_end", rss)
+      .integer("server_hwm_kb", hwm)
+      .integer("server_exit", serverExit);
+  j.num("server_chi2", after.chi2)
+      .integer("server_poses", after.poses)
+      .integer("server_updates", after.update_seq);
   j.str("label", a.get("label", ""));
 
-  std::printf("== loopd %s bench: %s, %zu poses, %s, solver %s\n", mode.c_str(), dataset.c_str(), n,
-              rate > 0 ? (std::to_string(static_cast<int>(rate)) + " Hz").c_str() : "as fast as possible", solver.c_str());
+  std::printf(
+      "== loopd %s bench: %s, %zu poses, %s, solver %s\n", mode.c_str(), dataset.c_str(), n,
+      rate > 0 ? (std::to_string(static_cast<int>(rate)) + " Hz").c_str() : "as fast as possible",
+      solver.c_str());
   int rc = 0;
   if (!thr) {
     const double p50 = percentile(lat, 50), p90 = percentile(lat, 90), p99 = percentile(lat, 99),
                  mx = lat.empty() ? std::nan("") : *std::max_element(lat.begin(), lat.end());
-    j.num("latency_ms_mean", mean(lat)).num("latency_ms_p50", p50).num("latency_ms_p90", p90)
-        .num("latency_ms_p99", p99).num("latency_ms_max", mx)
-        .num("server_side_ms_p50", percentile(srv, 50)).num("server_side_ms_p99", percentile(srv, 99))
+    j.num("latency_ms_mean", mean(lat))
+        .num("latency_ms_p50", p50)
+        .num("latency_ms_p90", p90)
+        .num("latency_ms_p99", p99)
+        .num("latency_ms_max", mx)
+        .num("server_side_ms_p50", percentile(srv, 50))
+        .num("server_side_ms_p99", percentile(srv, 99))
         .integer("warmup_poses", static_cast<long long>(warmup))
-        .num("warmup_latency_ms_max", warm.empty() ? std::nan("") : *std::max_element(warm.begin(), warm.end()));
-    std::printf("latency (publish -> first estimate holding the pose): p50 %.2f ms  p90 %.2f ms  p99 %.2f ms  "
-                "max %.2f ms  mean %.2f ms\n", p50, p90, p99, mx, mean(lat));
-    std::printf("  of which up to the server's publication: p50 %.2f ms  p99 %.2f ms; over poses %zu..%zu (the first "
-                "%zu, cold start, apart: max %.2f ms)\n", percentile(srv, 50), percentile(srv, 99), warmup + 1, n, warmup,
-                warm.empty() ? 0.0 : *std::max_element(warm.begin(), warm.end()));
+        .num("warmup_latency_ms_max",
+             warm.empty() ? std::nan("") : *std::max_element(warm.begin(), warm.end()));
+    std::printf(
+        "latency (publish -> first estimate holding the pose): p50 %.2f ms  p90 %.2f ms  p99 %.2f "
+        "ms  "
+        "max %.2f ms  mean %.2f ms\n",
+        p50, p90, p99, mx, mean(lat));
+    std::printf(
+        "  of which up to the server's publication: p50 %.2f ms  p99 %.2f ms; over poses %zu..%zu "
+        "(the first "
+        "%zu, cold start, apart: max %.2f ms)\n",
+        percentile(srv, 50), percentile(srv, 99), warmup + 1, n, warmup,
+        warm.empty() ? 0.0 : *std::max_element(warm.begin(), warm.end()));
     if (a.has("csv")) {
       std::ofstream csv(a.get("csv", ""));
       csv << "step,id,sent_s,latency_ms,server_ms,update_seq\n";
       for (size_t i = 0; i < tm.size(); ++i) {
         csv << i << "," << sched.steps[i].id << "," << secondsSince(t0, tm[i].sent) << ",";
         if (tm[i].seen)
-          csv << std::chrono::duration<double, std::milli>(tm[i].received - tm[i].sent).count() << ","
-              << static_cast<double>(tm[i].serverUtime - tm[i].sentWallUs) / 1e3 << "," << tm[i].updateSeq << "\n";
-        else csv << ",,\n";
+          csv << std::chrono::duration<double, std::milli>(tm[i].received - tm[i].sent).count()
+              << "," << static_cast<double>(tm[i].serverUtime - tm[i].sentWallUs) / 1e3 << ","
+              << tm[i].updateSeq << "\n";
+        else
+          csv << ",,\n";
       }
     }
   } else {
@@ -228,36 +274,55 @@ int run(const Args& a) {
     const double convS = converged ? secondsSince(t0, convAt) - idleSeconds : std::nan("");
     const double rateApplied = static_cast<double>(n) / applyS;
     const double rateConv = static_cast<double>(n) / convS;
-    j.num("server_s_last_pose", applyS).num("server_s_converged_minus_idle", convS).num("idle_seconds", idleSeconds)
-        .num("server_poses_per_s_applied", rateApplied).num("server_poses_per_s_converged", rateConv)
+    j.num("server_s_last_pose", applyS)
+        .num("server_s_converged_minus_idle", convS)
+        .num("idle_seconds", idleSeconds)
+        .num("server_poses_per_s_applied", rateApplied)
+        .num("server_poses_per_s_converged", rateConv)
         .num("server_converged_chi2", converged ? conv.chi2 : std::nan(""))
-        .num("server_mean_update_ms", after.mean_update_ms).integer("server_update_rounds", after.update_seq);
-    std::printf("server: published in %.2f s; last pose in an estimate after %.2f s (%.0f poses/s); converged "
-                "estimate after %.2f s net of the %.2f s idle wait (%.0f poses/s), chi2 %.6g, %lld update rounds\n",
-                secondsSince(t0, tLastSent), applyS, rateApplied, convS, idleSeconds, rateConv,
-                converged ? conv.chi2 : std::nan(""), static_cast<long long>(after.update_seq));
+        .num("server_mean_update_ms", after.mean_update_ms)
+        .integer("server_update_rounds", after.update_seq);
+    std::printf(
+        "server: published in %.2f s; last pose in an estimate after %.2f s (%.0f poses/s); "
+        "converged "
+        "estimate after %.2f s net of the %.2f s idle wait (%.0f poses/s), chi2 %.6g, %lld update "
+        "rounds\n",
+        secondsSince(t0, tLastSent), applyS, rateApplied, convS, idleSeconds, rateConv,
+        converged ? conv.chi2 : std::nan(""), static_cast<long long>(after.update_seq));
     if (!a.has("no-offline")) {
-      if (poses >= 0) std::fprintf(stderr, "note: --poses given; the offline run solves the whole file\n");
-      const OfflineResult off = runOffline(a.get("offline-solve", kBinaryDir + "/tools/loopd-solve"), dataset, solver, tmpBase);
+      if (poses >= 0)
+        std::fprintf(stderr, "note: --poses given; the offline run solves the whole file\n");
+      const OfflineResult off = runOffline(
+          a.get("offline-solve", kBinaryDir + "/tools/loopd-solve"), dataset, solver, tmpBase);
       if (off.ok) {
-        const double offRate = static_cast<double>(off.poses > 0 ? off.poses : static_cast<int>(n)) / off.solveS;
-        j.num("offline_solve_s", off.solveS).num("offline_poses_per_s", offRate).num("offline_final_chi2", off.finalChi2)
-            .num("ratio_converged", rateConv / offRate).num("ratio_applied", rateApplied / offRate);
-        std::printf("offline loopd-solve --solver %s --incremental: solve_s %.2f (%.0f poses/s), chi2 %.6g\n",
-                    solver.c_str(), off.solveS, offRate, off.finalChi2);
-        std::printf("ratio server/offline: %.2f (converged)  %.2f (last pose applied)   target >= 0.90\n",
-                    rateConv / offRate, rateApplied / offRate);
+        const double offRate =
+            static_cast<double>(off.poses > 0 ? off.poses : static_cast<int>(n)) / off.solveS;
+        j.num("offline_solve_s", off.solveS)
+            .num("offline_poses_per_s", offRate)
+            .num("offline_final_chi2", off.finalChi2)
+            .num("ratio_converged", rateConv / offRate)
+            .num("ratio_applied", rateApplied / offRate);
+        std::printf(
+            "offline loopd-solve --solver %s --incremental: solve_s %.2f (%.0f poses/s), chi2 "
+            "%.6g\n",
+            solver.c_str(), off.solveS, offRate, off.finalChi2);
+        std::printf(
+            "ratio server/offline: %.2f (converged)  %.2f (last pose applied)   target >= 0.90\n",
+            rateConv / offRate, rateApplied / offRate);
       } else {
         std::printf("offline run failed (see %s-offline.log)\n", tmpBase.c_str());
         rc = 1;
       }
     }
   }
-  std::printf("batches: %lld sent, %lld accepted, %lld lost (sent - accepted), %zu poses never in an estimate, "
-              "%lld sequence numbers missing; server exit %d; load average %.2f -> %.2f\n",
-              static_cast<long long>(sent), static_cast<long long>(accepted), static_cast<long long>(lost), unseen,
-              gapMissing, serverExit, loadStart, loadEnd);
-  std::printf("server RSS %.1f MB (peak %.1f MB); server log %s\n", rss / 1024.0, hwm / 1024.0, serverLog.c_str());
+  std::printf(
+      "batches: %lld sent, %lld accepted, %lld lost (sent - accepted), %zu poses never in an "
+      "estimate, "
+      "%lld sequence numbers missing; server exit %d; load average %.2f -> %.2f\n",
+      static_cast<long long>(sent), static_cast<long long>(accepted), static_cast<long long>(lost),
+      unseen, gapMissing, serverExit, loadStart, loadEnd);
+  std::printf("server RSS %.1f MB (peak %.1f MB); server log %s\n", rss / 1024.0, hwm / 1024.0,
+              serverLog.c_str());
   j.write(a.get("json", ""));
   if (lost != 0 || unseen != 0 || !gotStatus || serverExit != 0) rc = 1;
   return rc;
@@ -266,8 +331,9 @@ int run(const Args& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return benchMain(argc, argv,
-                   {"mode", "dataset", "rate", "poses", "robots", "solver", "lcm-url", "server", "server-arg",
-                    "channel-prefix", "drain-seconds", "offline-solve", "json", "csv", "warmup", "label"},
-                   {"connect", "no-offline"}, kUsage, "bench", run);
+  return benchMain(
+      argc, argv,
+      {"mode", "dataset", "rate", "poses", "robots", "solver", "lcm-url", "server", "server-arg",
+       "channel-prefix", "drain-seconds", "offline-solve", "json", "csv", "warmup", "label"},
+      {"connect", "no-offline"}, kUsage, "bench", run);
 }

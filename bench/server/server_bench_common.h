@@ -59,9 +59,10 @@ inline std::int64_t wallUs() {
 
 /// A private udpm URL: port from the pid (and a salt), ttl=0 so nothing leaves the host.
 inline std::string privateUrl(int salt = 0) {
-  std::system("bash -c 'ip route get 239.255.76.67 >/dev/null 2>&1 || "
-              "{ ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo; } "
-              ">/dev/null 2>&1'");
+  std::system(
+      "bash -c 'ip route get 239.255.76.67 >/dev/null 2>&1 || "
+      "{ ip link set lo up; ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo; } "
+      ">/dev/null 2>&1'");
   const int port = 20000 + static_cast<int>((static_cast<long>(getpid()) * 7 + salt) % 30000);
   return "udpm://239.255.76.67:" + std::to_string(port) + "?ttl=0";
 }
@@ -117,8 +118,10 @@ inline Schedule buildSchedule(const io::Dataset& ds, int robotsWanted, bool inte
 /// Queues one step into its robot's publisher and publishes it (returns the last sequence).
 inline std::int64_t publishStep(client::FactorPublisher& pub, const Step& st, bool is3d) {
   if (st.first) {
-    if (is3d) pub.initialValue(client::KeyRef::pose(st.robot, st.id), client::Pose3{});
-    else pub.initialValue(client::KeyRef::pose(st.robot, st.id), client::Pose2{});
+    if (is3d)
+      pub.initialValue(client::KeyRef::pose(st.robot, st.id), client::Pose3{});
+    else
+      pub.initialValue(client::KeyRef::pose(st.robot, st.id), client::Pose2{});
   }
   for (const auto& f : st.factors) pub.factor(f);
   return pub.flush();
@@ -220,7 +223,8 @@ class Monitor {
   }
 
   static std::uint64_t keyOf(std::int32_t robot, std::int64_t index) {
-    return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(robot)) << 40) ^ static_cast<std::uint64_t>(index);
+    return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(robot)) << 40) ^
+           static_cast<std::uint64_t>(index);
   }
   /// Registers poses to time (before any is sent); clears previous ones.
   void expect(const Schedule& s) {
@@ -257,7 +261,8 @@ class Monitor {
     return last_;
   }
   /// First status arrival (after `since`) that is converged with update_seq >= minSeq.
-  bool waitConverged(std::int64_t minSeq, double timeout, Clock::time_point& at, loopd::status_t& st) {
+  bool waitConverged(std::int64_t minSeq, double timeout, Clock::time_point& at,
+                     loopd::status_t& st) {
     std::unique_lock<std::mutex> l(mu_);
     const auto ok = [&] { return convergedSeq_ >= minSeq && convergedSeq_ > 0; };
     if (!cv_.wait_for(l, std::chrono::duration<double>(timeout), ok)) return false;
@@ -270,7 +275,8 @@ class Monitor {
     convergedSeq_ = -1;
   }
   /// Sends a command and waits for the status that acknowledges it (REQUEST_STATUS, RESET, ...).
-  bool command(std::int8_t cmd, double timeout, loopd::status_t* out = nullptr, const std::string& arg = "") {
+  bool command(std::int8_t cmd, double timeout, loopd::status_t* out = nullptr,
+               const std::string& arg = "") {
     const std::int64_t id = ++nextRequest_;
     loopd::command_t c{};
     c.utime = wallUs();
@@ -348,9 +354,9 @@ class Monitor {
 };
 
 /// Starts `loopd` on `url` (unless connecting to a running one) and waits until it answers.
-inline void startServer(ServerProcess& server, Monitor& mon, const std::string& exe, const std::string& url,
-                        const std::string& prefix, const std::vector<std::string>& extra,
-                        const std::string& logPath) {
+inline void startServer(ServerProcess& server, Monitor& mon, const std::string& exe,
+                        const std::string& url, const std::string& prefix,
+                        const std::vector<std::string>& extra, const std::string& logPath) {
   std::vector<std::string> args = {exe, "--lcm-url", url, "--log-level", "warn"};
   if (prefix != "LOOPD_") {
     args.push_back("--channel-prefix");
@@ -385,8 +391,10 @@ class Json {
   Json& num(const std::string& k, double v) {
     std::ostringstream s;
     s.precision(10);
-    if (std::isfinite(v)) s << v;
-    else s << "null";
+    if (std::isfinite(v))
+      s << v;
+    else
+      s << "null";
     add(k, s.str());
     return *this;
   }
@@ -451,10 +459,13 @@ inline Args parseArgs(int argc, char** argv, const std::vector<std::string>& kno
       a.kv[k] = "1";
       continue;
     }
-    if (std::find(known.begin(), known.end(), k) == known.end()) throw std::invalid_argument("unknown flag --" + k);
+    if (std::find(known.begin(), known.end(), k) == known.end())
+      throw std::invalid_argument("unknown flag --" + k);
     if (i + 1 >= argc) throw std::invalid_argument("--" + k + " needs a value");
-    if (k == "server-arg") a.serverArgs.push_back(argv[++i]);
-    else a.kv[k] = argv[++i];
+    if (k == "server-arg")
+      a.serverArgs.push_back(argv[++i]);
+    else
+      a.kv[k] = argv[++i];
   }
   return a;
 }

@@ -52,7 +52,8 @@ int run(const Args& a) {
   const std::string dataset = a.get("dataset", kDatasetsDir + "/city10000.g2o");
   const long poses = a.integer("poses", -1);
   const std::string lapMode = a.get("lap-mode", "reset");
-  if (lapMode != "reset" && lapMode != "resend" && lapMode != "grow") throw std::invalid_argument("--lap-mode reset|resend|grow");
+  if (lapMode != "reset" && lapMode != "resend" && lapMode != "grow")
+    throw std::invalid_argument("--lap-mode reset|resend|grow");
   const double samplePeriod = a.num("sample-seconds", 5);
   const std::string solver = a.get("solver", "isam2");
   const std::string url = a.get("lcm-url", privateUrl(2));
@@ -66,12 +67,15 @@ int run(const Args& a) {
   std::vector<std::string> extra = a.serverArgs;
   extra.insert(extra.begin(), {"--solver", solver});
   const std::string serverLog = tmpBase + "-loopd.log";
-  startServer(server, mon, a.get("server", kBinaryDir + "/server/loopd"), url, prefix, extra, serverLog);
+  startServer(server, mon, a.get("server", kBinaryDir + "/server/loopd"), url, prefix, extra,
+              serverLog);
   loopd::status_t before{};
   mon.command(loopd::command_t::REQUEST_STATUS, 10.0, &before);
-  std::printf("== loopd soak: %d robots x %.0f Hz for %.1f min, %s (%s laps), solver %s, LCM %s, server pid %d\n",
-              robots, rate, minutes, dataset.c_str(), lapMode.c_str(), solver.c_str(), url.c_str(),
-              static_cast<int>(server.pid));
+  std::printf(
+      "== loopd soak: %d robots x %.0f Hz for %.1f min, %s (%s laps), solver %s, LCM %s, server "
+      "pid %d\n",
+      robots, rate, minutes, dataset.c_str(), lapMode.c_str(), solver.c_str(), url.c_str(),
+      static_cast<int>(server.pid));
   std::fflush(stdout);
 
   const auto t0 = Clock::now();
@@ -87,13 +91,14 @@ int run(const Args& a) {
         return;
       }
       const loopd::status_t st = mon.lastStatus();
-      Sample s{secondsSince(t0), server.rssKb(), lapNow.load(), static_cast<long long>(st.poses), st.queue_depth};
+      Sample s{secondsSince(t0), server.rssKb(), lapNow.load(), static_cast<long long>(st.poses),
+               st.queue_depth};
       {
         std::lock_guard<std::mutex> l(samplesMu);
         samples.push_back(s);
       }
-      std::printf("  t %6.1f s  rss %7.1f MB  lap %d  poses %lld  queue %d\n", s.t, s.rssKb / 1024.0, s.lap, s.poses,
-                  s.queue);
+      std::printf("  t %6.1f s  rss %7.1f MB  lap %d  poses %lld  queue %d\n", s.t,
+                  s.rssKb / 1024.0, s.lap, s.poses, s.queue);
       std::fflush(stdout);
       for (int i = 0; i < static_cast<int>(samplePeriod * 10) && !stopSampler; ++i)
         std::this_thread::sleep_for(std::chrono::milliseconds(100));
@@ -117,12 +122,14 @@ int run(const Args& a) {
       std::printf("RESET not acknowledged\n");
       break;
     }
-    const Schedule sched = buildSchedule(ds, robots, true, poses, lapMode == "grow" ? lap * robots : 0);
+    const Schedule sched =
+        buildSchedule(ds, robots, true, poses, lapMode == "grow" ? lap * robots : 0);
     const std::string senderBase =
         "soak" + std::to_string(getpid()) + "_L" + std::to_string(fresh ? lap : 0) + "_r";
     std::vector<std::vector<size_t>> mine(static_cast<size_t>(sched.robots));
     for (size_t i = 0; i < sched.steps.size(); ++i)
-      mine[static_cast<size_t>(sched.steps[i].robot - (lapMode == "grow" ? lap * robots : 0))].push_back(i);
+      mine[static_cast<size_t>(sched.steps[i].robot - (lapMode == "grow" ? lap * robots : 0))]
+          .push_back(i);
     const auto lapStart = Clock::now();
     std::atomic<bool> cut{false};
     std::vector<std::thread> threads;
@@ -132,7 +139,8 @@ int run(const Args& a) {
         if (!lcm.good()) return;
         client::FactorPublisher pub(lcm, senderBase + std::to_string(r), prefix + "FACTORS");
         for (size_t i : mine[static_cast<size_t>(r)]) {
-          const auto due = lapStart + std::chrono::microseconds(static_cast<std::int64_t>(static_cast<double>(i) * 1e6 / totalRate));
+          const auto due = lapStart + std::chrono::microseconds(static_cast<std::int64_t>(
+                                          static_cast<double>(i) * 1e6 / totalRate));
           if (due >= deadline || crashed) {
             cut = true;
             break;
@@ -147,9 +155,11 @@ int run(const Args& a) {
     loopd::status_t st{};
     const auto drainEnd = Clock::now() + std::chrono::seconds(60);
     while (Clock::now() < drainEnd && !crashed) {
-      if (mon.command(loopd::command_t::REQUEST_STATUS, 5.0, &st) && st.queue_depth == 0 && st.batches_held == 0 &&
-          st.batches_accepted + st.batches_duplicate + st.batches_rejected - before.batches_accepted -
-                  before.batches_duplicate - before.batches_rejected >= sent)
+      if (mon.command(loopd::command_t::REQUEST_STATUS, 5.0, &st) && st.queue_depth == 0 &&
+          st.batches_held == 0 &&
+          st.batches_accepted + st.batches_duplicate + st.batches_rejected -
+                  before.batches_accepted - before.batches_duplicate - before.batches_rejected >=
+              sent)
         break;
       std::this_thread::sleep_for(std::chrono::milliseconds(200));
     }
@@ -161,16 +171,19 @@ int run(const Args& a) {
     }
     const long endRss = server.rssKb();
     peak = std::max(peak, endRss);
-    laps.push_back({lap + 1, secondsSince(t0, lapStart), secondsSince(t0), sent.load(), static_cast<long long>(st.poses),
-                    peak, endRss, !cut});
-    std::printf("lap %d %s: %.1f..%.1f s, %lld batches sent so far, server: %lld poses, %d/%d robots in a common "
-                "frame, accepted %lld, duplicate %lld, rejected %lld, expired %lld, mean update %.2f ms, rss %.1f MB "
-                "(lap peak %.1f MB)\n",
-                lap + 1, cut ? "(cut by the deadline)" : "done", laps.back().startS, laps.back().endS, sent.load(),
-                static_cast<long long>(st.poses), st.robots_in_common_frame, st.robots,
-                static_cast<long long>(st.batches_accepted), static_cast<long long>(st.batches_duplicate),
-                static_cast<long long>(st.batches_rejected), static_cast<long long>(st.batches_expired),
-                st.mean_update_ms, endRss / 1024.0, peak / 1024.0);
+    laps.push_back({lap + 1, secondsSince(t0, lapStart), secondsSince(t0), sent.load(),
+                    static_cast<long long>(st.poses), peak, endRss, !cut});
+    std::printf(
+        "lap %d %s: %.1f..%.1f s, %lld batches sent so far, server: %lld poses, %d/%d robots in a "
+        "common "
+        "frame, accepted %lld, duplicate %lld, rejected %lld, expired %lld, mean update %.2f ms, "
+        "rss %.1f MB "
+        "(lap peak %.1f MB)\n",
+        lap + 1, cut ? "(cut by the deadline)" : "done", laps.back().startS, laps.back().endS,
+        sent.load(), static_cast<long long>(st.poses), st.robots_in_common_frame, st.robots,
+        static_cast<long long>(st.batches_accepted), static_cast<long long>(st.batches_duplicate),
+        static_cast<long long>(st.batches_rejected), static_cast<long long>(st.batches_expired),
+        st.mean_update_ms, endRss / 1024.0, peak / 1024.0);
     std::fflush(stdout);
   }
   stopSampler = true;
@@ -192,47 +205,75 @@ int run(const Args& a) {
   for (const auto& l : laps)
     if (l.complete) {
       ++complete;
-      if (complete == 1) firstPeak = l.peakRssKb;
-      else maxLaterPeak = std::max(maxLaterPeak, l.peakRssKb);
+      if (complete == 1)
+        firstPeak = l.peakRssKb;
+      else
+        maxLaterPeak = std::max(maxLaterPeak, l.peakRssKb);
       lastPeak = l.peakRssKb;
     }
-  std::printf("== soak result: %s; %.1f min, %zu laps (%d complete), %lld batches sent, %lld accepted, %lld duplicate, "
-              "%lld rejected, %lld expired, %lld lost (sent - accepted - duplicate - rejected)\n",
-              crashed ? "SERVER CRASHED" : "no crash", secondsSince(t0) / 60.0, laps.size(), complete, sent.load(),
-              accepted, duplicate, rejected, expired, lost);
-  std::printf("   RSS: first complete lap peak %.1f MB, later complete laps' max peak %.1f MB (last %.1f MB), end %.1f MB, "
-              "VmHWM %.1f MB; server exit %d; server log %s\n",
-              firstPeak / 1024.0, maxLaterPeak / 1024.0, lastPeak / 1024.0, rssEnd / 1024.0, hwm / 1024.0, serverExit,
-              serverLog.c_str());
+  std::printf(
+      "== soak result: %s; %.1f min, %zu laps (%d complete), %lld batches sent, %lld accepted, "
+      "%lld duplicate, "
+      "%lld rejected, %lld expired, %lld lost (sent - accepted - duplicate - rejected)\n",
+      crashed ? "SERVER CRASHED" : "no crash", secondsSince(t0) / 60.0, laps.size(), complete,
+      sent.load(), accepted, duplicate, rejected, expired, lost);
+  std::printf(
+      "   RSS: first complete lap peak %.1f MB, later complete laps' max peak %.1f MB (last %.1f "
+      "MB), end %.1f MB, "
+      "VmHWM %.1f MB; server exit %d; server log %s\n",
+      firstPeak / 1024.0, maxLaterPeak / 1024.0, lastPeak / 1024.0, rssEnd / 1024.0, hwm / 1024.0,
+      serverExit, serverLog.c_str());
 
   if (a.has("csv")) {
     std::ofstream csv(a.get("csv", ""));
     csv << "t_s,rss_kb,lap,server_poses,queue_depth\n";
-    for (const auto& s : samples) csv << s.t << "," << s.rssKb << "," << s.lap << "," << s.poses << "," << s.queue << "\n";
+    for (const auto& s : samples)
+      csv << s.t << "," << s.rssKb << "," << s.lap << "," << s.poses << "," << s.queue << "\n";
   }
   std::string lapJson = "[";
   for (size_t i = 0; i < laps.size(); ++i) {
     const auto& l = laps[i];
     lapJson += (i ? ", " : "") + Json()
-                                   .integer("lap", l.lap).num("start_s", l.startS).num("end_s", l.endS)
-                                   .integer("sent_cumulative", l.sent).integer("server_poses", l.poses)
-                                   .integer("peak_rss_kb", l.peakRssKb).integer("end_rss_kb", l.endRssKb)
-                                   .integer("complete", l.complete ? 1 : 0).text();
+                                     .integer("lap", l.lap)
+                                     .num("start_s", l.startS)
+                                     .num("end_s", l.endS)
+                                     .integer("sent_cumulative", l.sent)
+                                     .integer("server_poses", l.poses)
+                                     .integer("peak_rss_kb", l.peakRssKb)
+                                     .integer("end_rss_kb", l.endRssKb)
+                                     .integer("complete", l.complete ? 1 : 0)
+                                     .text();
   }
   lapJson += "]";
   std::string rssJson = "[";
   for (size_t i = 0; i < samples.size(); ++i)
-    rssJson += (i ? ", [" : "[") + std::to_string(samples[i].t) + ", " + std::to_string(samples[i].rssKb) + "]";
+    rssJson += (i ? ", [" : "[") + std::to_string(samples[i].t) + ", " +
+               std::to_string(samples[i].rssKb) + "]";
   rssJson += "]";
   Json j;
-  j.str("bench", "soak").str("dataset", dataset).str("solver", solver).str("lap_mode", lapMode)
-      .integer("robots", robots).num("rate_hz_per_robot", rate).num("minutes", minutes)
-      .integer("crashed", crashed ? 1 : 0).integer("server_exit", serverExit).integer("status_ok", gotStatus ? 1 : 0)
-      .integer("batches_sent", sent.load()).integer("batches_accepted", accepted).integer("batches_duplicate", duplicate)
-      .integer("batches_rejected", rejected).integer("batches_expired", expired).integer("lost_batches", lost)
-      .integer("first_lap_peak_rss_kb", firstPeak).integer("later_laps_max_peak_rss_kb", maxLaterPeak)
-      .integer("end_rss_kb", rssEnd).integer("hwm_kb", hwm).num("load_avg_1m_end", loadAverage1())
-      .raw("laps", lapJson).raw("rss_samples_s_kb", rssJson);
+  j.str("bench", "soak")
+      .str("dataset", dataset)
+      .str("solver", solver)
+      .str("lap_mode", lapMode)
+      .integer("robots", robots)
+      .num("rate_hz_per_robot", rate)
+      .num("minutes", minutes)
+      .integer("crashed", crashed ? 1 : 0)
+      .integer("server_exit", serverExit)
+      .integer("status_ok", gotStatus ? 1 : 0)
+      .integer("batches_sent", sent.load())
+      .integer("batches_accepted", accepted)
+      .integer("batches_duplicate", duplicate)
+      .integer("batches_rejected", rejected)
+      .integer("batches_expired", expired)
+      .integer("lost_batches", lost)
+      .integer("first_lap_peak_rss_kb", firstPeak)
+      .integer("later_laps_max_peak_rss_kb", maxLaterPeak)
+      .integer("end_rss_kb", rssEnd)
+      .integer("hwm_kb", hwm)
+      .num("load_avg_1m_end", loadAverage1())
+      .raw("laps", lapJson)
+      .raw("rss_samples_s_kb", rssJson);
   j.write(a.get("json", ""));
   return crashed || lost != 0 || rejected != 0 || expired != 0 || serverExit != 0 ? 1 : 0;
 }
@@ -241,7 +282,7 @@ int run(const Args& a) {
 
 int main(int argc, char** argv) {
   return benchMain(argc, argv,
-                   {"minutes", "robots", "rate", "dataset", "poses", "lap-mode", "sample-seconds", "solver", "lcm-url",
-                    "server", "server-arg", "csv", "json"},
+                   {"minutes", "robots", "rate", "dataset", "poses", "lap-mode", "sample-seconds",
+                    "solver", "lcm-url", "server", "server-arg", "csv", "json"},
                    {}, kUsage, "soak", run);
 }

@@ -11,22 +11,32 @@ namespace loopd {
 
 int varDim(VarType t) {
   switch (t) {
-    case VarType::SE2: return 3;
-    case VarType::SE3: return 6;
-    case VarType::Point2: return 2;
-    case VarType::Point3: return 3;
-    case VarType::Scalar: return 1;
+    case VarType::SE2:
+      return 3;
+    case VarType::SE3:
+      return 6;
+    case VarType::Point2:
+      return 2;
+    case VarType::Point3:
+      return 3;
+    case VarType::Scalar:
+      return 1;
   }
   return 0;
 }
 
 const char* varTypeName(VarType t) {
   switch (t) {
-    case VarType::SE2: return "SE2";
-    case VarType::SE3: return "SE3";
-    case VarType::Point2: return "Point2";
-    case VarType::Point3: return "Point3";
-    case VarType::Scalar: return "Scalar";
+    case VarType::SE2:
+      return "SE2";
+    case VarType::SE3:
+      return "SE3";
+    case VarType::Point2:
+      return "Point2";
+    case VarType::Point3:
+      return "Point3";
+    case VarType::Scalar:
+      return "Scalar";
   }
   return "?";
 }
@@ -156,9 +166,15 @@ void Values::retract(int s, const double* delta) {
       set(s, x);
       break;
     }
-    case VarType::Point2: Eigen::Map<Vec2>(data(s)) += Eigen::Map<const Vec2>(delta); break;
-    case VarType::Point3: Eigen::Map<Vec3>(data(s)) += Eigen::Map<const Vec3>(delta); break;
-    case VarType::Scalar: data(s)[0] += delta[0]; break;
+    case VarType::Point2:
+      Eigen::Map<Vec2>(data(s)) += Eigen::Map<const Vec2>(delta);
+      break;
+    case VarType::Point3:
+      Eigen::Map<Vec3>(data(s)) += Eigen::Map<const Vec3>(delta);
+      break;
+    case VarType::Scalar:
+      data(s)[0] += delta[0];
+      break;
   }
 }
 

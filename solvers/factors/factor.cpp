@@ -7,10 +7,14 @@ namespace loopd {
 
 const char* factorRoleName(FactorRole r) {
   switch (r) {
-    case FactorRole::Prior: return "prior";
-    case FactorRole::Odometry: return "odometry";
-    case FactorRole::LoopClosure: return "loop_closure";
-    case FactorRole::Landmark: return "landmark";
+    case FactorRole::Prior:
+      return "prior";
+    case FactorRole::Odometry:
+      return "odometry";
+    case FactorRole::LoopClosure:
+      return "loop_closure";
+    case FactorRole::Landmark:
+      return "landmark";
   }
   return "?";
 }

@@ -39,8 +39,8 @@ class PosePointFactor3 final : public Factor {
 class BearingRangeFactor2 final : public Factor {
  public:
   /// measured = (bearing rad, range m); information over (bearing, range).
-  BearingRangeFactor2(Key pose, Key point, const Vec2& measured,
-                      const Eigen::Matrix2d& information, FactorRole role = FactorRole::Landmark);
+  BearingRangeFactor2(Key pose, Key point, const Vec2& measured, const Eigen::Matrix2d& information,
+                      FactorRole role = FactorRole::Landmark);
   void evaluate(const double* const* x, double* r, double* const* J) const override;
   std::unique_ptr<Factor> clone() const override;
   const char* typeName() const override { return "BearingRange2"; }

@@ -23,9 +23,7 @@ void SE3::toTranslationQuaternion(double* out) const {
   out[6] = q.w();
 }
 
-SE3 SE3::retract(const Vec6& d) const {
-  return {R * expSO3(d.tail<3>()), t + R * d.head<3>()};
-}
+SE3 SE3::retract(const Vec6& d) const { return {R * expSO3(d.tail<3>()), t + R * d.head<3>()}; }
 
 Mat6 SE3::adjoint() const {
   Mat6 A;

@@ -192,8 +192,8 @@ Eigen::MatrixXd Isam2Backend::marginalCovarianceByPathSolve(const std::vector<Ke
         .solveInPlace(xF);
   }
   Eigen::MatrixXd out(cols, cols);
-  for (size_t i = 0; i < vs.size(); ++i) out.middleRows(colOff[i], dims_[vs[i]]) =
-      Y.middleRows(scratchPos_[vs[i]], dims_[vs[i]]);
+  for (size_t i = 0; i < vs.size(); ++i)
+    out.middleRows(colOff[i], dims_[vs[i]]) = Y.middleRows(scratchPos_[vs[i]], dims_[vs[i]]);
   for (int v : touched) scratchPos_[v] = -1;
   return 0.5 * (out + out.transpose());
 }

@@ -36,8 +36,8 @@ struct BlockNormalEquations {
   using MatD = Eigen::Matrix<double, D, D>;
   using RowsD = Eigen::Matrix<double, D, Eigen::Dynamic>;
   // Residual  x_j − A x_i − c  (c: D×columns), weight W (D×D, symmetric PSD).
-  void add(int si, int sj, const MatD& A, const RowsD& c, const MatD& W,
-           const RowsD& knownI, const RowsD& knownJ) {
+  void add(int si, int sj, const MatD& A, const RowsD& c, const MatD& W, const RowsD& knownI,
+           const RowsD& knownJ) {
     const int ii = u.index[si], jj = u.index[sj];
     // J_i = −A, J_j = I.
     const MatD Hii = A.transpose() * W * A, Hjj = W, Hij = -A.transpose() * W;
@@ -117,7 +117,11 @@ LinearUnknowns numberConnected(const FactorGraph& graph, const Values& values, i
 // to pick each edge's multiple of 2π.
 std::vector<double> treeOrientations(const FactorGraph& graph, const Values& values,
                                      int anchorSlot) {
-  struct Arc { int to; double dtheta; bool odometry; };
+  struct Arc {
+    int to;
+    double dtheta;
+    bool odometry;
+  };
   std::vector<std::vector<Arc>> adj(values.size());
   for (const auto& f : graph.factors()) {
     const auto* b = dynamic_cast<const BetweenFactorSE2*>(f.get());
@@ -151,7 +155,8 @@ std::vector<double> treeOrientations(const FactorGraph& graph, const Values& val
 
 int anchorSlotOf(const Values& values, Key anchor) {
   const int s = values.slot(anchor);
-  if (s < 0) throw std::invalid_argument("initialisation anchor " + keyToString(anchor) + " missing");
+  if (s < 0)
+    throw std::invalid_argument("initialisation anchor " + keyToString(anchor) + " missing");
   return s;
 }
 

@@ -55,8 +55,8 @@ void DatasetBuilder::addEdge(const LineScanner& in, Edge e) {
     const HypothesisGroup& g = ds_.hypotheses.back();
     const Edge& first = g.firstEdge < e.index ? ds_.edges[g.firstEdge] : e;
     if (e.type != first.type) {
-      in.fail("the alternatives of HYPOTHESES on line " + std::to_string(g.line) +
-              " must all be " + std::string(in.tag()) + "-like edges of one type (line " +
+      in.fail("the alternatives of HYPOTHESES on line " + std::to_string(g.line) + " must all be " +
+              std::string(in.tag()) + "-like edges of one type (line " +
               std::to_string(first.line) + " differs)");
     }
     --groupEdgesPending_;
@@ -80,9 +80,9 @@ void DatasetBuilder::beginHypotheses(const LineScanner& in, int count, bool null
 void DatasetBuilder::expectNoOpenGroup(const LineScanner& in) const {
   if (groupEdgesPending_ > 0) {
     const HypothesisGroup& g = ds_.hypotheses.back();
-    in.fail("HYPOTHESES on line " + std::to_string(g.line) + " expects " +
-            std::to_string(g.count) + " edge lines, but " + std::to_string(groupEdgesPending_) +
-            " are missing before this " + std::string(in.tag()) + " line");
+    in.fail("HYPOTHESES on line " + std::to_string(g.line) + " expects " + std::to_string(g.count) +
+            " edge lines, but " + std::to_string(groupEdgesPending_) + " are missing before this " +
+            std::string(in.tag()) + " line");
   }
 }
 
@@ -112,8 +112,9 @@ Dataset DatasetBuilder::finish() {
   if (groupEdgesPending_ > 0) {
     const HypothesisGroup& g = ds_.hypotheses.back();
     throw DatasetError(ds_.path, g.line,
-                       "HYPOTHESES expects " + std::to_string(g.count) + " edge lines, but the file ends " +
-                           std::to_string(groupEdgesPending_) + " short");
+                       "HYPOTHESES expects " + std::to_string(g.count) +
+                           " edge lines, but the file ends " + std::to_string(groupEdgesPending_) +
+                           " short");
   }
   if (!ds_.hypotheses.empty() && !ds_.hadVertices) {
     throw DatasetError(ds_.path, ds_.hypotheses.front().line,

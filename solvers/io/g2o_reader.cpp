@@ -65,7 +65,8 @@ Dataset parseG2o(std::string_view text, const std::string& name) {
       if (k > 1000) in.fail("HYPOTHESES count " + std::to_string(k) + " is over 1000");
       bool null = false;
       if (in.count() == 2) {
-        if (in.field(1) != "null") in.fail("HYPOTHESES: expected 'null', got " + detail::quoted(in.field(1)));
+        if (in.field(1) != "null")
+          in.fail("HYPOTHESES: expected 'null', got " + detail::quoted(in.field(1)));
         null = true;
       }
       out.beginHypotheses(in, static_cast<int>(k), null);

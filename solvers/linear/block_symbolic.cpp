@@ -240,8 +240,8 @@ void analyzeBlockPattern(const std::vector<int>& blockOffsets, const std::vector
     const int* r1 = out.rows.data() + out.rowStart[s + 1];
     const int* it = std::lower_bound(r0, r1, row);
     if (it == r1 || *it != row) throw std::logic_error("BlockCholesky: entry outside L's pattern");
-    return static_cast<int>(out.valueStart[s] + static_cast<long>(col - out.superCol[s]) * (r1 - r0) +
-                            (it - r0));
+    return static_cast<int>(out.valueStart[s] +
+                            static_cast<long>(col - out.superCol[s]) * (r1 - r0) + (it - r0));
   };
   for (int j = 0; j < nb; ++j) {
     const int J = newOf[j];

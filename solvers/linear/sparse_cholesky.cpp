@@ -12,9 +12,15 @@ SparseCholesky::SparseCholesky(FactorizationKind kind) {
   common_.quick_return_if_not_posdef = 1;
   switch (kind) {
     case FactorizationKind::Block:  // not a CHOLMOD mode; behave as Auto
-    case FactorizationKind::Auto: common_.supernodal = CHOLMOD_AUTO; break;
-    case FactorizationKind::Supernodal: common_.supernodal = CHOLMOD_SUPERNODAL; break;
-    case FactorizationKind::Simplicial: common_.supernodal = CHOLMOD_SIMPLICIAL; break;
+    case FactorizationKind::Auto:
+      common_.supernodal = CHOLMOD_AUTO;
+      break;
+    case FactorizationKind::Supernodal:
+      common_.supernodal = CHOLMOD_SUPERNODAL;
+      break;
+    case FactorizationKind::Simplicial:
+      common_.supernodal = CHOLMOD_SIMPLICIAL;
+      break;
   }
   common_.final_ll = 1;
 }

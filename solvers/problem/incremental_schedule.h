@@ -9,10 +9,10 @@
 namespace loopd {
 
 struct IncrementalStep {
-  Key pose;                   // the pose this step introduces
-  std::vector<int> factors;   // indices into the problem's graph (no ambiguous alternatives)
-  std::vector<int> groups;    // indices into problem.ambiguous: due once every key of every
-                              // alternative has appeared
+  Key pose;                  // the pose this step introduces
+  std::vector<int> factors;  // indices into the problem's graph (no ambiguous alternatives)
+  std::vector<int> groups;   // indices into problem.ambiguous: due once every key of every
+                             // alternative has appeared
 };
 
 std::vector<IncrementalStep> incrementalSchedule(const PoseGraphProblem& problem);

@@ -22,13 +22,17 @@ bool predictThrough(const Factor& f, const Values& known, Values& guess) {
   const Values* b = holder(f.key(1), known, guess);
   if ((a == nullptr) == (b == nullptr)) return false;  // both or neither known
   if (const auto* e = dynamic_cast<const BetweenFactorSE2*>(&f)) {
-    if (a) guess.insert(f.key(1), a->se2(a->slot(f.key(0))) * e->measured());
-    else guess.insert(f.key(0), b->se2(b->slot(f.key(1))) * e->measured().inverse());
+    if (a)
+      guess.insert(f.key(1), a->se2(a->slot(f.key(0))) * e->measured());
+    else
+      guess.insert(f.key(0), b->se2(b->slot(f.key(1))) * e->measured().inverse());
     return true;
   }
   if (const auto* e = dynamic_cast<const BetweenFactorSE3*>(&f)) {
-    if (a) guess.insert(f.key(1), a->se3(a->slot(f.key(0))) * e->measured());
-    else guess.insert(f.key(0), b->se3(b->slot(f.key(1))) * e->measured().inverse());
+    if (a)
+      guess.insert(f.key(1), a->se3(a->slot(f.key(0))) * e->measured());
+    else
+      guess.insert(f.key(0), b->se3(b->slot(f.key(1))) * e->measured().inverse());
     return true;
   }
   if (!a) return false;  // a landmark cannot place its observer

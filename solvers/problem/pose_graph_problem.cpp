@@ -19,9 +19,15 @@ namespace {
 void insertVertex(Values& values, const io::Vertex& v) {
   const Key k = vertexKey(v);
   switch (v.type) {
-    case io::VertexType::SE2: values.insert(k, SE2(v.value[0], v.value[1], v.value[2])); break;
-    case io::VertexType::SE3: values.insert(k, SE3::fromTranslationQuaternion(v.value.data())); break;
-    case io::VertexType::Point2: values.insertPoint2(k, Vec2(v.value[0], v.value[1])); break;
+    case io::VertexType::SE2:
+      values.insert(k, SE2(v.value[0], v.value[1], v.value[2]));
+      break;
+    case io::VertexType::SE3:
+      values.insert(k, SE3::fromTranslationQuaternion(v.value.data()));
+      break;
+    case io::VertexType::Point2:
+      values.insertPoint2(k, Vec2(v.value[0], v.value[1]));
+      break;
     case io::VertexType::Point3:
       values.insertPoint3(k, Vec3(v.value[0], v.value[1], v.value[2]));
       break;
@@ -51,9 +57,9 @@ FactorPtr makeFactor(const io::Edge& e) {
                                                 Vec3(m[0], m[1], m[2]),
                                                 e.information.topLeftCorner<3, 3>());
     case io::EdgeType::BearingRange2:
-      return std::make_shared<BearingRangeFactor2>(
-          a, landmarkKey(static_cast<std::uint64_t>(e.to)), Vec2(m[0], m[1]),
-          e.information.topLeftCorner<2, 2>());
+      return std::make_shared<BearingRangeFactor2>(a, landmarkKey(static_cast<std::uint64_t>(e.to)),
+                                                   Vec2(m[0], m[1]),
+                                                   e.information.topLeftCorner<2, 2>());
   }
   throw std::logic_error("unknown edge type");
 }
@@ -97,10 +103,9 @@ PoseGraphProblem buildProblem(const io::Dataset& ds) {
   }
   // TORO EQUIV: the two poses are one place.
   for (const auto& [a, b] : ds.equivalences) {
-    auto f = std::make_shared<BetweenFactorSE2>(poseKey(static_cast<std::uint64_t>(a)),
-                                                poseKey(static_cast<std::uint64_t>(b)), SE2(),
-                                                Eigen::Matrix3d::Identity() * 1e6,
-                                                FactorRole::LoopClosure);
+    auto f = std::make_shared<BetweenFactorSE2>(
+        poseKey(static_cast<std::uint64_t>(a)), poseKey(static_cast<std::uint64_t>(b)), SE2(),
+        Eigen::Matrix3d::Identity() * 1e6, FactorRole::LoopClosure);
     f->setId(static_cast<FactorId>(p.graph.size()));
     p.graph.add(std::move(f));
   }
@@ -118,7 +123,8 @@ AmbiguousFactor ambiguousFactor(const PoseGraphProblem& p, int group) {
 std::vector<AmbiguousFactor> ambiguousFactors(const PoseGraphProblem& p) {
   std::vector<AmbiguousFactor> out;
   out.reserve(p.ambiguous.size());
-  for (int g = 0; g < static_cast<int>(p.ambiguous.size()); ++g) out.push_back(ambiguousFactor(p, g));
+  for (int g = 0; g < static_cast<int>(p.ambiguous.size()); ++g)
+    out.push_back(ambiguousFactor(p, g));
   return out;
 }
 
@@ -146,7 +152,9 @@ void storeEstimate(const Values& estimate, io::Dataset& ds) {
         v.value[2] = x.theta;
         break;
       }
-      case io::VertexType::SE3: estimate.se3(s).toTranslationQuaternion(v.value.data()); break;
+      case io::VertexType::SE3:
+        estimate.se3(s).toTranslationQuaternion(v.value.data());
+        break;
       case io::VertexType::Point2:
       case io::VertexType::Point3: {
         const int d = v.type == io::VertexType::Point2 ? 2 : 3;

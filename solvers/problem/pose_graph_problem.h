@@ -18,11 +18,11 @@ struct AmbiguousGroup {
 };
 
 struct PoseGraphProblem {
-  FactorGraph graph;          // factor i is the file's edge i (id() = i), alternatives included
+  FactorGraph graph;  // factor i is the file's edge i (id() = i), alternatives included
   std::vector<AmbiguousGroup> ambiguous;  // file order
-  Values initial;             // poses first (file order), then landmarks
+  Values initial;                         // poses first (file order), then landmarks
   bool is3d = false;
-  Key firstPose = 0;          // the gauge: lowest pose id
+  Key firstPose = 0;  // the gauge: lowest pose id
 
   int poseCount() const { return poses; }
   int landmarkCount() const { return landmarks; }
@@ -31,9 +31,10 @@ struct PoseGraphProblem {
 };
 
 /// Builds factors and initial values. Between edges whose ends are consecutive ids are
-/// odometry, others (and every alternative of a HYPOTHESES group) loop closures; pose–landmark edges are landmark sightings. EQUIV pairs
-/// become tight between constraints (identity, information 1e6). Throws std::invalid_argument
-/// (naming the file line) for an edge the factors reject.
+/// odometry, others (and every alternative of a HYPOTHESES group) loop closures; pose–landmark
+/// edges are landmark sightings. EQUIV pairs become tight between constraints (identity,
+/// information 1e6). Throws std::invalid_argument (naming the file line) for an edge the factors
+/// reject.
 PoseGraphProblem buildProblem(const io::Dataset& dataset);
 
 /// Group g as the Backend seam takes it: id g, alternatives the group's factors.

@@ -33,7 +33,8 @@ TEST(FactorPublisher, SequencesIdsAndNoiseLayout) {
   Eigen::Matrix3d info;
   info << 1, 2, 3, 2, 4, 5, 3, 5, 6;
   EXPECT_EQ(pub.odometry(1, 0, 1, Pose2{1, 0, 0}, info), 0);
-  EXPECT_EQ(pub.loopClosure(KeyRef::pose(1, 1), KeyRef::pose(2, 7), Pose2{0, 1, 0}, info, "dcs", 2.0), 1);
+  EXPECT_EQ(
+      pub.loopClosure(KeyRef::pose(1, 1), KeyRef::pose(2, 7), Pose2{0, 1, 0}, info, "dcs", 2.0), 1);
   pub.initialValue(KeyRef::pose(1, 0), Pose2{0, 0, 0});
   EXPECT_EQ(pub.flush(), 1);
   pub.remove(1);
@@ -61,7 +62,8 @@ TEST(FactorPublisher, SequencesIdsAndNoiseLayout) {
 TEST(FactorPublisher, FlushesAtMaxItems) {
   Capture cap;
   client::FactorPublisher pub(cap.sink(), "a", "X_FACTORS");
-  for (int i = 0; i < 450; ++i) pub.odometry(0, i, i + 1, Pose2{1, 0, 0}, Eigen::Matrix3d::Identity());
+  for (int i = 0; i < 450; ++i)
+    pub.odometry(0, i, i + 1, Pose2{1, 0, 0}, Eigen::Matrix3d::Identity());
   pub.flush();
   ASSERT_EQ(cap.batches.size(), 3u);
   EXPECT_EQ(cap.batches[0].num_factors, factor_batch_t::MAX_ITEMS);
@@ -77,14 +79,18 @@ TEST(FactorPublisher, AmbiguousGroupsAndTheServersRules) {
   const Eigen::Matrix3d info = Eigen::Vector3d(100, 100, 1000).asDiagonal();
   const Eigen::Matrix2d info2 = Eigen::Vector2d(10, 20).asDiagonal();
   pub.odometry(0, 0, 1, Pose2{1, 0, 0}, info);  // id 0
-  const auto place = pub.ambiguous(A::MULTI_ASSOCIATION,
-                                   {client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, 0), Pose2{}, info),
-                                    client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, 4), Pose2{}, info)},
-                                   true, 0.5);
+  const auto place = pub.ambiguous(
+      A::MULTI_ASSOCIATION,
+      {client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, 0), Pose2{}, info),
+       client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, 4), Pose2{}, info)},
+      true, 0.5);
   const auto tree = pub.ambiguous(A::MULTI_ASSOCIATION,
-                                  {client::landmarkFactor(KeyRef::pose(0, 9), KeyRef::point(0, 1), Eigen::Vector2d(1, 2), info2),
-                                   client::landmarkFactor(KeyRef::pose(0, 9), KeyRef::point(0, 2), Eigen::Vector2d(1, 2), info2),
-                                   client::landmarkFactor(KeyRef::pose(0, 9), KeyRef::point(0, 3), Eigen::Vector2d(1, 2), info2)},
+                                  {client::landmarkFactor(KeyRef::pose(0, 9), KeyRef::point(0, 1),
+                                                          Eigen::Vector2d(1, 2), info2),
+                                   client::landmarkFactor(KeyRef::pose(0, 9), KeyRef::point(0, 2),
+                                                          Eigen::Vector2d(1, 2), info2),
+                                   client::landmarkFactor(KeyRef::pose(0, 9), KeyRef::point(0, 3),
+                                                          Eigen::Vector2d(1, 2), info2)},
                                   false, 0.0, 77);
   EXPECT_EQ(place, 1);  // the factor id space
   EXPECT_EQ(tree, 77);
@@ -110,13 +116,18 @@ TEST(FactorPublisher, AmbiguousGroupsAndTheServersRules) {
     return client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, to), Pose2{x, 0, 0}, info);
   };
   // What the server would refuse is refused here, and nothing is queued.
-  EXPECT_THROW(pub.ambiguous(0, {lc(0, 0), lc(4, 0)}, false), std::invalid_argument);                     // mode
-  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0)}, false), std::invalid_argument);              // k = 1
-  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {}, true), std::invalid_argument);                        // k = 0
-  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0), lc(4, 0)}, true, -1), std::invalid_argument);  // weight
-  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0), lc(4, 1)}, false), std::invalid_argument);     // measurement
-  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0), lc(0, 0)}, false), std::invalid_argument);     // same keys
-  EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {lc(0, 0), lc(4, 1)}, false), std::invalid_argument);     // keys differ
+  EXPECT_THROW(pub.ambiguous(0, {lc(0, 0), lc(4, 0)}, false), std::invalid_argument);  // mode
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0)}, false),
+               std::invalid_argument);                                                 // k = 1
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {}, true), std::invalid_argument);  // k = 0
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0), lc(4, 0)}, true, -1),
+               std::invalid_argument);  // weight
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0), lc(4, 1)}, false),
+               std::invalid_argument);  // measurement
+  EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {lc(0, 0), lc(0, 0)}, false),
+               std::invalid_argument);  // same keys
+  EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {lc(0, 0), lc(4, 1)}, false),
+               std::invalid_argument);  // keys differ
   std::vector<factor_t> many;
   for (int i = 0; i < 17; ++i) many.push_back(lc(i, 0));
   EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, many, false), std::invalid_argument);
@@ -133,7 +144,8 @@ TEST(FactorPublisher, AmbiguousGroupsAndTheServersRules) {
   EXPECT_EQ(pub.pendingItems(), 4);
 }
 
-estimate_t chunk(int64_t seq, int robot, bool full, int index, int count, std::vector<int64_t> ids) {
+estimate_t chunk(int64_t seq, int robot, bool full, int index, int count,
+                 std::vector<int64_t> ids) {
   estimate_t e{};
   e.update_seq = seq;
   e.robot = robot;
@@ -167,7 +179,7 @@ TEST(EstimateSubscriber, AssemblesSnapshotsAndDeltas) {
   EXPECT_EQ(sub.robot(0).poses.size(), 3u);
   send(chunk(2, 0, true, 0, 2, {0, 1}));  // first half of a snapshot: not applied yet
   EXPECT_EQ(sub.robot(0).poses.at(0)[1], 1.0);
-  send(chunk(2, 0, true, 1, 2, {5}));     // complete: replaces the table (2 is gone)
+  send(chunk(2, 0, true, 1, 2, {5}));  // complete: replaces the table (2 is gone)
   const auto r = sub.robot(0);
   EXPECT_EQ(r.poses.size(), 3u);
   EXPECT_EQ(r.poses.count(2), 0u);

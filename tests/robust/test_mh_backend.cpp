@@ -132,9 +132,8 @@ Square square() {
 }
 
 FactorPtr closure(FactorId id, int a, int b, const SE2& m) {
-  auto f = std::make_shared<BetweenFactorSE2>(poseKey(a), poseKey(b), m,
-                                              Eigen::Matrix3d::Identity() * 100.0,
-                                              FactorRole::LoopClosure);
+  auto f = std::make_shared<BetweenFactorSE2>(
+      poseKey(a), poseKey(b), m, Eigen::Matrix3d::Identity() * 100.0, FactorRole::LoopClosure);
   f->setId(id);
   return f;
 }

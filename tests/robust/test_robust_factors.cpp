@@ -94,8 +94,8 @@ TEST(RobustKernels, ChiSquareQuantiles) {
 
 TEST(RobustFactors, KernelJacobiansAreFrozenWeightIrls) {
   for (double noise : {0.01, 0.5, 3.0})
-    for (KernelType k : {KernelType::Huber, KernelType::Cauchy, KernelType::GemanMcClure,
-                         KernelType::DCS}) {
+    for (KernelType k :
+         {KernelType::Huber, KernelType::Cauchy, KernelType::GemanMcClure, KernelType::DCS}) {
       Fixture2D fx(noise);
       auto kf = KernelFactor::make(fx.between, k);
       EXPECT_EQ(kf->id(), 7u);
@@ -227,13 +227,13 @@ TEST(RobustBackendDecorator, SwitchableBookkeepingAndRemoval) {
   u.initial.insert(poseKey(0), SE2(0, 0, 0));
   u.initial.insert(poseKey(1), SE2(1, 0, 0));
   u.initial.insert(poseKey(2), SE2(2, 0, 0));
-  auto o1 = std::make_shared<BetweenFactorSE2>(poseKey(0), poseKey(1), SE2(1, 0, 0),
-                                               Eigen::Matrix3d::Identity() * 100,
-                                               FactorRole::Odometry);
+  auto o1 =
+      std::make_shared<BetweenFactorSE2>(poseKey(0), poseKey(1), SE2(1, 0, 0),
+                                         Eigen::Matrix3d::Identity() * 100, FactorRole::Odometry);
   o1->setId(0);
-  auto o2 = std::make_shared<BetweenFactorSE2>(poseKey(1), poseKey(2), SE2(1, 0, 0),
-                                               Eigen::Matrix3d::Identity() * 100,
-                                               FactorRole::Odometry);
+  auto o2 =
+      std::make_shared<BetweenFactorSE2>(poseKey(1), poseKey(2), SE2(1, 0, 0),
+                                         Eigen::Matrix3d::Identity() * 100, FactorRole::Odometry);
   o2->setId(1);
   auto good = std::make_shared<BetweenFactorSE2>(poseKey(0), poseKey(2), SE2(2, 0, 0),
                                                  Eigen::Matrix3d::Identity() * 10);
@@ -269,9 +269,9 @@ BackendUpdate tinyGraph() {
   u.initial.insert(poseKey(1), SE2(1, 0, 0));
   u.initial.insert(poseKey(2), SE2(2, 0, 0));
   auto odo = [](int id, int a, int b) {
-    auto f = std::make_shared<BetweenFactorSE2>(poseKey(a), poseKey(b), SE2(1, 0, 0),
-                                                Eigen::Matrix3d::Identity() * 100,
-                                                FactorRole::Odometry);
+    auto f =
+        std::make_shared<BetweenFactorSE2>(poseKey(a), poseKey(b), SE2(1, 0, 0),
+                                           Eigen::Matrix3d::Identity() * 100, FactorRole::Odometry);
     f->setId(id);
     return f;
   };

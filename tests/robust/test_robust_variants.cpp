@@ -217,7 +217,7 @@ TEST(TailGate, MedianAndTailOfNormalizedChi2) {
   EXPECT_NEAR(t.gate, q99 * std::pow(q99 / q90, 3.0), 1e-9);
   EXPECT_NEAR(tailGate(q, 3.0, 10.0).gate, 10.0 * t.scale, 1e-9);  // capped by the median
   EXPECT_NEAR(tailGate(q, 3.0, 10.0).tail, q99 * std::pow(q99 / q90, 3.0), 1e-9);  // uncapped
-  EXPECT_EQ(tailGate({1, 2, 3}, 3.0, 100.0).gate, 0.0);            // too few values
+  EXPECT_EQ(tailGate({1, 2, 3}, 3.0, 100.0).gate, 0.0);                            // too few values
   // More than half exact fits (noise-free closures): the median cap is 0, the tail is not,
   // which is why the re-check at the tail reads `tail`.
   std::vector<double> exact(600, 0.0);

@@ -2,12 +2,12 @@
 // Helpers for tests that run loopd, loopd-feed, loopd-listen and loopd-solve as processes over
 // real LCM: a unique udpm URL per test, a multicast route if the host has none, spawning with
 // a timeout, reading g2o vertex files.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
-#include <fcntl.h>
 
 #include <chrono>
 #include <cmath>
@@ -48,8 +48,9 @@ inline void ensureMulticast() {
   if (done) return;
   done = true;
   if (std::system("ip route get 239.255.76.67 >/dev/null 2>&1") == 0) return;
-  std::system("ip link set lo up 2>/dev/null; ip link set lo multicast on 2>/dev/null; "
-              "ip route add 224.0.0.0/4 dev lo 2>/dev/null");
+  std::system(
+      "ip link set lo up 2>/dev/null; ip link set lo multicast on 2>/dev/null; "
+      "ip route add 224.0.0.0/4 dev lo 2>/dev/null");
 }
 
 /// A udpm URL of its own for each test (port from the test's name and the pid).
@@ -57,7 +58,9 @@ inline std::string uniqueUrl(int salt = 0) {
   ensureMulticast();
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
   std::size_t h = std::hash<std::string>()(std::string(info->test_suite_name()) + info->name());
-  const int port = 20000 + static_cast<int>((h + static_cast<std::size_t>(getpid()) * 7 + static_cast<std::size_t>(salt)) % 30000);
+  const int port = 20000 + static_cast<int>((h + static_cast<std::size_t>(getpid()) * 7 +
+                                             static_cast<std::size_t>(salt)) %
+                                            30000);
   return "udpm://239.255.76.67:" + std::to_string(port) + "?ttl=0";
 }
 
@@ -143,7 +146,8 @@ struct Proc {
   }
 };
 
-inline int runTool(const std::vector<std::string>& args, const std::string& log, double timeout = 120) {
+inline int runTool(const std::vector<std::string>& args, const std::string& log,
+                   double timeout = 120) {
   Proc p = Proc::start(args, log);
   return p.wait(timeout);
 }

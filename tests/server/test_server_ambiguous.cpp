@@ -17,12 +17,12 @@
 #include "loopd/estimate_t.hpp"
 #include "loopd/status_t.hpp"
 #include "server/batch_validator.h"
-#include "tests/server/wire_encode.h"
 #include "server/engine.h"
 #include "server/journal.h"
 #include "server/server_config.h"
 #include "solvers/io/dataset_reader.h"
 #include "tests/server/live_util.h"
+#include "tests/server/wire_encode.h"
 
 using namespace loopd;
 using namespace loopd::server;
@@ -87,9 +87,22 @@ struct Fixture {
       : pub(Channels::withPrefix("T_"),
             [this](const std::string& ch, const std::vector<uint8_t>& b) {
               const int n = static_cast<int>(b.size());
-              if (ch == "T_ERROR") { loopd::error_t m; m.decode(b.data(), 0, n); errors.push_back(m); }
-              if (ch == "T_STATUS") { status_t m{}; const int used = m.decode(b.data(), 0, n); EXPECT_EQ(used, n) << "status decode"; statuses.push_back(m); }
-              if (ch == "T_ESTIMATE") { estimate_t m; m.decode(b.data(), 0, n); estimates.push_back(m); }
+              if (ch == "T_ERROR") {
+                loopd::error_t m;
+                m.decode(b.data(), 0, n);
+                errors.push_back(m);
+              }
+              if (ch == "T_STATUS") {
+                status_t m{};
+                const int used = m.decode(b.data(), 0, n);
+                EXPECT_EQ(used, n) << "status decode";
+                statuses.push_back(m);
+              }
+              if (ch == "T_ESTIMATE") {
+                estimate_t m;
+                m.decode(b.data(), 0, n);
+                estimates.push_back(m);
+              }
             }),
         engine(options(solver, maxHypotheses), pub, journal) {}
   static EngineOptions options(const std::string& solver, int k) {
@@ -116,7 +129,8 @@ struct Fixture {
   /// `info`: odometry information of x, y (θ: 10×).
   void square(double info = 100, int steps = 16) {
     for (int i = 0; i < steps; ++i)
-      send(batch("fe", ++seq, {odo(id++, 0, i, i + 1, {1, 0, (i % 4 == 3) ? M_PI / 2 : 0.0}, info)}));
+      send(batch("fe", ++seq,
+                 {odo(id++, 0, i, i + 1, {1, 0, (i % 4 == 3) ? M_PI / 2 : 0.0}, info)}));
   }
   /// The reply to REQUEST_STATUS (a periodic status may follow it).
   /// The reply to REQUEST_STATUS (a periodic status may follow it), its decision chunks merged.
@@ -128,13 +142,17 @@ struct Fixture {
     for (size_t i = from; i < statuses.size(); ++i) {
       const status_t& x = statuses[i];
       if (x.request_id != 7 || !x.decisions_full) continue;
-      if (chunks == 0) out = x;
-      else out.decisions.insert(out.decisions.end(), x.decisions.begin(), x.decisions.end());
+      if (chunks == 0)
+        out = x;
+      else
+        out.decisions.insert(out.decisions.end(), x.decisions.begin(), x.decisions.end());
       EXPECT_EQ(x.decisions_chunk_index, chunks);
       ++chunks;
     }
-    if (chunks == 0) ADD_FAILURE() << "no reply to REQUEST_STATUS";
-    else EXPECT_EQ(chunks, out.decisions_chunk_count);
+    if (chunks == 0)
+      ADD_FAILURE() << "no reply to REQUEST_STATUS";
+    else
+      EXPECT_EQ(chunks, out.decisions_chunk_count);
     out.num_decisions = static_cast<std::int16_t>(std::min<size_t>(out.decisions.size(), 32767));
     return out;
   }
@@ -145,7 +163,8 @@ struct Fixture {
   }
   std::vector<double> pose(std::int64_t i) {
     std::vector<double> out;
-    EXPECT_TRUE(engine.commonFramePose(makeKey(0, KeyKind::Pose, static_cast<std::uint64_t>(i)), out));
+    EXPECT_TRUE(
+        engine.commonFramePose(makeKey(0, KeyKind::Pose, static_cast<std::uint64_t>(i)), out));
     return out;
   }
 };
@@ -155,13 +174,15 @@ double maxDiff(Fixture& a, Fixture& b, int poses) {
   for (int i = 0; i <= poses; ++i) {
     const auto x = a.pose(i), y = b.pose(i);
     if (x.size() != 3 || y.size() != 3) return 1e9;
-    d = std::max({d, std::hypot(x[0] - y[0], x[1] - y[1]), std::abs(std::remainder(x[2] - y[2], 2 * M_PI))});
+    d = std::max(
+        {d, std::hypot(x[0] - y[0], x[1] - y[1]), std::abs(std::remainder(x[2] - y[2], 2 * M_PI))});
   }
   return d;
 }
 
 // SWITCH_SOLVER to isam2 and back to mh keeps every group and, per group id, its choice.
-void expectSwitchRoundTripKeeps(Fixture& f, const std::vector<std::pair<std::int64_t, int>>& choices) {
+void expectSwitchRoundTripKeeps(Fixture& f,
+                                const std::vector<std::pair<std::int64_t, int>>& choices) {
   f.command(command_t::SWITCH_SOLVER, "isam2");
   status_t s = f.fullStatus();
   EXPECT_EQ(s.solver, "isam2");
@@ -199,19 +220,24 @@ void expectResumedAsWritten(const Fixture& g, const status_t& s, const status_t&
 
 TEST(AmbiguousValidation, WellFormedGroupsPass) {
   FactorBatchValidator v;
-  EXPECT_TRUE(v.check(batch("a", 1, {}, {group(1, A::MULTI_ASSOCIATION,
-                                                 {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 4, {0, 0, 0})})}))
+  EXPECT_TRUE(v.check(batch("a", 1, {},
+                            {group(1, A::MULTI_ASSOCIATION,
+                                   {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 4, {0, 0, 0})})}))
                   .empty());
-  EXPECT_TRUE(v.check(batch("a", 1, {}, {group(1, A::MULTI_MEASUREMENT,
-                                                 {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 0, {1, 0, 0})})}))
+  EXPECT_TRUE(v.check(batch("a", 1, {},
+                            {group(1, A::MULTI_MEASUREMENT,
+                                   {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 0, {1, 0, 0})})}))
                   .empty());
-  EXPECT_TRUE(v.check(batch("a", 1, {}, {group(1, A::MULTI_MEASUREMENT, {closure(0, 9, 0, {0, 0, 0})}, true, 2.5)}))
-                  .empty());
+  EXPECT_TRUE(
+      v.check(batch("a", 1, {},
+                    {group(1, A::MULTI_MEASUREMENT, {closure(0, 9, 0, {0, 0, 0})}, true, 2.5)}))
+          .empty());
   // Inter-robot alternatives are well-formed; whether their robots share a frame is a
   // contextual check (AmbiguousInterRobot tests).
   factor_t inter = closure(0, 9, 4, {0, 0, 0});
   inter.keys[1].robot = 2;
-  EXPECT_TRUE(v.check(batch("a", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 9, 0, {0, 0, 0}), inter})}))
+  EXPECT_TRUE(v.check(batch("a", 1, {},
+                            {group(1, A::MULTI_ASSOCIATION, {closure(0, 9, 0, {0, 0, 0}), inter})}))
                   .empty());
 }
 
@@ -225,32 +251,73 @@ TEST(AmbiguousValidation, EachBadGroupGetsItsCode) {
   };
   const std::vector<Case> cases = {
       {"mode 0", [](A& a) { a.mode = 0; }, loopd::error_t::INVALID_FIELD},
-      {"one alternative, no null", [](A& a) { a.alternatives.resize(1); a.num_alternatives = 1; }, loopd::error_t::INVALID_FIELD},
-      {"no alternative, null", [](A& a) { a.alternatives.clear(); a.num_alternatives = 0; a.null_hypothesis = true; }, loopd::error_t::INVALID_FIELD},
-      {"17 alternatives", [](A& a) {
+      {"one alternative, no null",
+       [](A& a) {
+         a.alternatives.resize(1);
+         a.num_alternatives = 1;
+       },
+       loopd::error_t::INVALID_FIELD},
+      {"no alternative, null",
+       [](A& a) {
+         a.alternatives.clear();
+         a.num_alternatives = 0;
+         a.null_hypothesis = true;
+       },
+       loopd::error_t::INVALID_FIELD},
+      {"17 alternatives",
+       [](A& a) {
          a.alternatives.clear();
          for (int i = 0; i < 17; ++i) a.alternatives.push_back(closure(0, 30, i, {0, 0, 0}));
          a.num_alternatives = 17;
-       }, loopd::error_t::LIMIT_EXCEEDED},
-      {"null weight NaN", [&](A& a) { a.null_hypothesis = true; a.null_weight = nan; }, loopd::error_t::NON_FINITE},
-      {"null weight -1", [](A& a) { a.null_hypothesis = true; a.null_weight = -1; }, loopd::error_t::INVALID_FIELD},
-      {"NaN measurement", [&](A& a) { a.alternatives[1].measurement[0] = nan; }, loopd::error_t::NON_FINITE},
-      {"Inf noise", [](A& a) { a.alternatives[0].noise[0] = std::numeric_limits<double>::infinity(); }, loopd::error_t::NON_FINITE},
-      {"non-PD noise", [](A& a) { a.alternatives[1].noise = {1, 0, 0, -1, 0, 1}; }, loopd::error_t::NOT_POSITIVE_DEFINITE},
-      {"odometry role", [](A& a) { for (auto& f : a.alternatives) f.role = factor_t::ROLE_ODOMETRY; }, loopd::error_t::INVALID_FIELD},
-      {"landmark key kind", [](A& a) { a.alternatives[1].keys[1].kind = loopd::key_t::LANDMARK; }, loopd::error_t::WRONG_KEY_KIND},
-      {"mixed types", [](A& a) {
-         a.alternatives[1] = client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, 4), client::Pose3{},
-                                                       Eigen::Matrix<double, 6, 6>::Identity());
-       }, loopd::error_t::INVALID_FIELD},
-      {"association, different measurement", [](A& a) { a.alternatives[1].measurement[0] = 0.5; }, loopd::error_t::INVALID_FIELD},
-      {"association, different noise", [](A& a) { a.alternatives[1].noise[0] = 7; }, loopd::error_t::INVALID_FIELD},
-      {"association, same keys twice", [](A& a) { a.alternatives[1].keys = a.alternatives[0].keys; }, loopd::error_t::INVALID_FIELD},
-      {"measurement mode, different keys", [](A& a) { a.mode = A::MULTI_MEASUREMENT; }, loopd::error_t::INVALID_FIELD},
+       },
+       loopd::error_t::LIMIT_EXCEEDED},
+      {"null weight NaN",
+       [&](A& a) {
+         a.null_hypothesis = true;
+         a.null_weight = nan;
+       },
+       loopd::error_t::NON_FINITE},
+      {"null weight -1",
+       [](A& a) {
+         a.null_hypothesis = true;
+         a.null_weight = -1;
+       },
+       loopd::error_t::INVALID_FIELD},
+      {"NaN measurement", [&](A& a) { a.alternatives[1].measurement[0] = nan; },
+       loopd::error_t::NON_FINITE},
+      {"Inf noise",
+       [](A& a) { a.alternatives[0].noise[0] = std::numeric_limits<double>::infinity(); },
+       loopd::error_t::NON_FINITE},
+      {"non-PD noise", [](A& a) { a.alternatives[1].noise = {1, 0, 0, -1, 0, 1}; },
+       loopd::error_t::NOT_POSITIVE_DEFINITE},
+      {"odometry role",
+       [](A& a) {
+         for (auto& f : a.alternatives) f.role = factor_t::ROLE_ODOMETRY;
+       },
+       loopd::error_t::INVALID_FIELD},
+      {"landmark key kind", [](A& a) { a.alternatives[1].keys[1].kind = loopd::key_t::LANDMARK; },
+       loopd::error_t::WRONG_KEY_KIND},
+      {"mixed types",
+       [](A& a) {
+         a.alternatives[1] =
+             client::loopClosureFactor(KeyRef::pose(0, 9), KeyRef::pose(0, 4), client::Pose3{},
+                                       Eigen::Matrix<double, 6, 6>::Identity());
+       },
+       loopd::error_t::INVALID_FIELD},
+      {"association, different measurement", [](A& a) { a.alternatives[1].measurement[0] = 0.5; },
+       loopd::error_t::INVALID_FIELD},
+      {"association, different noise", [](A& a) { a.alternatives[1].noise[0] = 7; },
+       loopd::error_t::INVALID_FIELD},
+      {"association, same keys twice",
+       [](A& a) { a.alternatives[1].keys = a.alternatives[0].keys; },
+       loopd::error_t::INVALID_FIELD},
+      {"measurement mode, different keys", [](A& a) { a.mode = A::MULTI_MEASUREMENT; },
+       loopd::error_t::INVALID_FIELD},
       {"negative id", [](A& a) { a.id = -4; }, loopd::error_t::INVALID_FIELD},
   };
   for (const auto& c : cases) {
-    A a = group(3, A::MULTI_ASSOCIATION, {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 4, {0, 0, 0})});
+    A a =
+        group(3, A::MULTI_ASSOCIATION, {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 4, {0, 0, 0})});
     c.mutate(a);
     const auto issues = v.check(batch("a", 1, {}, {a}));
     ASSERT_FALSE(issues.empty()) << c.what;
@@ -259,8 +326,9 @@ TEST(AmbiguousValidation, EachBadGroupGetsItsCode) {
     EXPECT_TRUE(found) << c.what << ": " << issues[0].reason;
   }
   // A group's id shares the factor id space.
-  auto dup = batch("a", 1, {odo(3, 0, 0, 1, {1, 0, 0})},
-                   {group(3, A::MULTI_ASSOCIATION, {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 4, {0, 0, 0})})});
+  auto dup = batch(
+      "a", 1, {odo(3, 0, 0, 1, {1, 0, 0})},
+      {group(3, A::MULTI_ASSOCIATION, {closure(0, 9, 0, {0, 0, 0}), closure(0, 9, 4, {0, 0, 0})})});
   EXPECT_EQ(v.check(dup).at(0).code, loopd::error_t::DUPLICATE_FACTOR_ID);
   // Alternatives count as items.
   std::vector<factor_t> many;
@@ -279,27 +347,35 @@ TEST(AmbiguousValidation, BadBatchesGiveErrorsAndChangeNothing) {
     const size_t errorsBefore = f.errors.size();
     const factor_t good = odo(500, 0, 16, 17, {1, 0, 0});
     // A valid factor with an invalid group: nothing of the batch is applied.
-    A bad = group(501, A::MULTI_ASSOCIATION, {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 4, {0.5, 0, 0})});
+    A bad = group(501, A::MULTI_ASSOCIATION,
+                  {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 4, {0.5, 0, 0})});
     f.send(batch("fe", ++f.seq, {good}, {bad}));
     // Wrong variable type: robot 0 has SE2 poses.
-    A se3 = group(502, A::MULTI_MEASUREMENT,
-                  {client::loopClosureFactor(KeyRef::pose(0, 16), KeyRef::pose(0, 0), client::Pose3{},
-                                             Eigen::Matrix<double, 6, 6>::Identity() * 10),
-                   client::loopClosureFactor(KeyRef::pose(0, 16), KeyRef::pose(0, 0), client::Pose3{},
-                                             Eigen::Matrix<double, 6, 6>::Identity() * 20)});
+    A se3 =
+        group(502, A::MULTI_MEASUREMENT,
+              {client::loopClosureFactor(KeyRef::pose(0, 16), KeyRef::pose(0, 0), client::Pose3{},
+                                         Eigen::Matrix<double, 6, 6>::Identity() * 10),
+               client::loopClosureFactor(KeyRef::pose(0, 16), KeyRef::pose(0, 0), client::Pose3{},
+                                         Eigen::Matrix<double, 6, 6>::Identity() * 20)});
     f.send(batch("fe", ++f.seq, {}, {se3}));
     // Removal of an id never used, and a duplicate of a used id.
     f.send(batch("fe", ++f.seq, {}, {}, {9999}));
-    f.send(batch("fe", ++f.seq, {}, {group(2, A::MULTI_ASSOCIATION, {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 4, {0, 0, 0})})}));
+    f.send(batch("fe", ++f.seq, {},
+                 {group(2, A::MULTI_ASSOCIATION,
+                        {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 4, {0, 0, 0})})}));
     ASSERT_GE(f.errors.size(), errorsBefore + 4) << solver;
     EXPECT_EQ(f.errors[errorsBefore].factor_id, 501);
     EXPECT_EQ(f.errors[errorsBefore].code, loopd::error_t::INVALID_FIELD);
-    EXPECT_NE(f.errors[errorsBefore].reason.find("MULTI_ASSOCIATION"), std::string::npos) << f.errors[errorsBefore].reason;
+    EXPECT_NE(f.errors[errorsBefore].reason.find("MULTI_ASSOCIATION"), std::string::npos)
+        << f.errors[errorsBefore].reason;
     bool wrongDim = false, unknownId = false, dupId = false;
     for (size_t i = errorsBefore; i < f.errors.size(); ++i) {
-      wrongDim |= f.errors[i].code == loopd::error_t::WRONG_DIMENSION && f.errors[i].factor_id == 502;
-      unknownId |= f.errors[i].code == loopd::error_t::UNKNOWN_FACTOR_ID && f.errors[i].factor_id == 9999;
-      dupId |= f.errors[i].code == loopd::error_t::DUPLICATE_FACTOR_ID && f.errors[i].factor_id == 2;
+      wrongDim |=
+          f.errors[i].code == loopd::error_t::WRONG_DIMENSION && f.errors[i].factor_id == 502;
+      unknownId |=
+          f.errors[i].code == loopd::error_t::UNKNOWN_FACTOR_ID && f.errors[i].factor_id == 9999;
+      dupId |=
+          f.errors[i].code == loopd::error_t::DUPLICATE_FACTOR_ID && f.errors[i].factor_id == 2;
     }
     EXPECT_TRUE(wrongDim && unknownId && dupId) << solver;
     const status_t after = f.fullStatus();
@@ -315,7 +391,9 @@ TEST(AmbiguousEngine, GroupOverUnknownPoseIsHeldThenApplied) {
   Fixture f("mh");
   f.square(100, 12);
   // Pose 16 does not exist yet: the group waits for it.
-  f.send(batch("lc", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 8, {0, 0, 0})}, true)}));
+  f.send(batch("lc", 1, {},
+               {group(1, A::MULTI_ASSOCIATION,
+                      {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 8, {0, 0, 0})}, true)}));
   EXPECT_EQ(f.statuses.back().batches_held, 1);
   EXPECT_EQ(f.statuses.back().ambiguous, 0);
   for (int i = 12; i < 16; ++i)
@@ -335,12 +413,15 @@ TEST(AmbiguousEngine, MhPicksTheTrueAlternativeAndEqualsTheOutlierFreeOptimum) {
   Fixture f("mh"), ref("isam2");
   for (Fixture* x : {&f, &ref})
     for (int i = 0; i < 16; ++i)
-      x->send(batch("fe", ++x->seq, {odo(x->id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+      x->send(
+          batch("fe", ++x->seq,
+                {odo(x->id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
   // Back at the start: pose 0 (true), the opposite corner 8 or the next corner 4 (decoys), or none.
-  f.send(batch("lc", 1, {}, {group(40, A::MULTI_ASSOCIATION,
-                                   {closure(0, 16, 8, {0, 0, 0}), closure(0, 16, 0, {0, 0, 0}),
-                                    closure(0, 16, 4, {0, 0, 0})},
-                                   true)}));
+  f.send(batch("lc", 1, {},
+               {group(40, A::MULTI_ASSOCIATION,
+                      {closure(0, 16, 8, {0, 0, 0}), closure(0, 16, 0, {0, 0, 0}),
+                       closure(0, 16, 4, {0, 0, 0})},
+                      true)}));
   ref.send(batch("lc", 1, {closure(0, 16, 0, {0, 0, 0}, 40)}));
   f.command(command_t::OPTIMIZE);
   ref.command(command_t::OPTIMIZE);
@@ -369,8 +450,9 @@ TEST(AmbiguousEngine, UndecidedHypothesesStatusRequestAndLaterData) {
   // Weak odometry: two candidate measurements 0.6 m apart both fit at first.
   Fixture f("mh");
   f.square(1.0);
-  f.send(batch("lc", 1, {}, {group(7, A::MULTI_MEASUREMENT,
-                                   {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 0, {0.6, 0, 0})})}));
+  f.send(batch("lc", 1, {},
+               {group(7, A::MULTI_MEASUREMENT,
+                      {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 0, {0.6, 0, 0})})}));
   status_t s = f.statuses.back();
   EXPECT_EQ(s.live_hypotheses, 2);
   EXPECT_EQ(s.undecided_ambiguous, 1);
@@ -402,7 +484,8 @@ TEST(AmbiguousEngine, UndecidedHypothesesStatusRequestAndLaterData) {
   ASSERT_EQ(byRank[0].size(), 17u);
   ASSERT_EQ(byRank[1].size(), 17u);
   // Pose 16 relative to pose 0 differs by the two measurements (0.6 m along x of pose 16).
-  const double gap = std::hypot(byRank[0][16][0] - byRank[1][16][0], byRank[0][16][1] - byRank[1][16][1]);
+  const double gap =
+      std::hypot(byRank[0][16][0] - byRank[1][16][0], byRank[0][16][1] - byRank[1][16][1]);
   EXPECT_GT(gap, 0.3);
   const status_t* reply = nullptr;
   for (const auto& x : f.statuses)
@@ -428,8 +511,9 @@ TEST(AmbiguousEngine, UndecidedHypothesesStatusRequestAndLaterData) {
 TEST(AmbiguousEngine, MaxHypothesesBoundsLiveHypotheses) {
   Fixture f("mh", nullptr, 1);
   f.square(1.0);
-  f.send(batch("lc", 1, {}, {group(7, A::MULTI_MEASUREMENT,
-                                   {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 0, {0.6, 0, 0})})}));
+  f.send(batch("lc", 1, {},
+               {group(7, A::MULTI_MEASUREMENT,
+                      {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 0, {0.6, 0, 0})})}));
   EXPECT_EQ(f.statuses.back().live_hypotheses, 1);
   EXPECT_EQ(f.statuses.back().undecided_ambiguous, 0);
 }
@@ -440,8 +524,9 @@ TEST(AmbiguousEngine, OtherSolversFlattenTheAlternatives) {
   Fixture plain("isam2"), robust("dcs");
   for (Fixture* x : {&plain, &robust}) {
     x->square();
-    x->send(batch("lc", 1, {}, {group(40, A::MULTI_ASSOCIATION,
-                                      {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 8, {0, 0, 0})}, true)}));
+    x->send(batch("lc", 1, {},
+                  {group(40, A::MULTI_ASSOCIATION,
+                         {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 8, {0, 0, 0})}, true)}));
     x->command(command_t::OPTIMIZE);
     EXPECT_TRUE(x->errors.empty());
     const status_t s = x->fullStatus();
@@ -475,10 +560,20 @@ TEST(AmbiguousEngine, MhRemovalRebuildsWithoutTheGroup) {
   Fixture f("mh"), ref("mh");
   for (Fixture* x : {&f, &ref})
     for (int i = 0; i < 16; ++i)
-      x->send(batch("fe", ++x->seq, {odo(x->id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
-  f.send(batch("lc", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 8, {0, 0, 0})})}));
-  f.send(batch("lc", 2, {}, {group(2, A::MULTI_MEASUREMENT, {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
-  ref.send(batch("lc", 2, {}, {group(2, A::MULTI_MEASUREMENT, {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
+      x->send(
+          batch("fe", ++x->seq,
+                {odo(x->id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+  f.send(batch("lc", 1, {},
+               {group(1, A::MULTI_ASSOCIATION,
+                      {closure(0, 16, 0, {0, 0, 0}), closure(0, 16, 8, {0, 0, 0})})}));
+  f.send(
+      batch("lc", 2, {},
+            {group(2, A::MULTI_MEASUREMENT,
+                   {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
+  ref.send(
+      batch("lc", 2, {},
+            {group(2, A::MULTI_MEASUREMENT,
+                   {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
   f.send(batch("lc", 3, {}, {}, {1}));
   EXPECT_TRUE(f.errors.empty()) << f.errors[0].reason;
   f.command(command_t::OPTIMIZE);
@@ -494,8 +589,11 @@ TEST(AmbiguousEngine, MhRemovalRebuildsWithoutTheGroup) {
 TEST(AmbiguousEngine, SwitchSolverKeepsTheGroups) {
   Fixture f("isam2");
   for (int i = 0; i < 16; ++i)
-    f.send(batch("fe", ++f.seq, {odo(f.id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
-  f.send(batch("lc", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 16, 8, {0, 0, 0}), closure(0, 16, 0, {0, 0, 0})}, true)}));
+    f.send(batch("fe", ++f.seq,
+                 {odo(f.id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+  f.send(batch("lc", 1, {},
+               {group(1, A::MULTI_ASSOCIATION,
+                      {closure(0, 16, 8, {0, 0, 0}), closure(0, 16, 0, {0, 0, 0})}, true)}));
   const double flatChi2 = f.fullStatus().chi2;
   f.command(command_t::SWITCH_SOLVER, "mh");
   f.command(command_t::OPTIMIZE);
@@ -506,13 +604,17 @@ TEST(AmbiguousEngine, SwitchSolverKeepsTheGroups) {
   EXPECT_EQ(f.decision(s, 1)->alternative, 1);
   EXPECT_LT(s.chi2, flatChi2);  // the decoy no longer pulls
   // A group added under mh survives the way back.
-  f.send(batch("lc", 2, {}, {group(2, A::MULTI_MEASUREMENT, {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
+  f.send(
+      batch("lc", 2, {},
+            {group(2, A::MULTI_MEASUREMENT,
+                   {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
   expectSwitchRoundTripKeeps(f, {{1, 1}, {2, 0}});
   EXPECT_TRUE(f.errors.empty());
 }
 
 TEST(AmbiguousEngine, JournalResumeReplaysTheGroups) {
-  const std::string path = ::testing::TempDir() + "/" + std::to_string(getpid()) + "_amb_journal.lcmlog";
+  const std::string path =
+      ::testing::TempDir() + "/" + std::to_string(getpid()) + "_amb_journal.lcmlog";
   std::remove(path.c_str());
   status_t first;
   std::vector<std::vector<double>> poses;
@@ -520,10 +622,18 @@ TEST(AmbiguousEngine, JournalResumeReplaysTheGroups) {
     Journal j(path, false);
     Fixture f("mh", &j);
     for (int i = 0; i < 16; ++i)
-      f.send(batch("fe", ++f.seq, {odo(f.id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
-    f.send(batch("lc", 1, {}, {group(1, A::MULTI_ASSOCIATION, {closure(0, 16, 8, {0, 0, 0}), closure(0, 16, 0, {0, 0, 0})}, true)}));
-    f.send(batch("lc", 2, {}, {group(2, A::MULTI_MEASUREMENT, {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
-    f.send(batch("lc", 3, {}, {group(3, A::MULTI_ASSOCIATION, {closure(0, 14, 2, {0, 0, 0}), closure(0, 14, 6, {0, 0, 0})}, true)}));
+      f.send(batch("fe", ++f.seq,
+                   {odo(f.id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+    f.send(batch("lc", 1, {},
+                 {group(1, A::MULTI_ASSOCIATION,
+                        {closure(0, 16, 8, {0, 0, 0}), closure(0, 16, 0, {0, 0, 0})}, true)}));
+    f.send(
+        batch("lc", 2, {},
+              {group(2, A::MULTI_MEASUREMENT,
+                     {closure(0, 12, 0, {4, 0, M_PI / 2}), closure(0, 12, 0, {6, 0, M_PI / 2})})}));
+    f.send(batch("lc", 3, {},
+                 {group(3, A::MULTI_ASSOCIATION,
+                        {closure(0, 14, 2, {0, 0, 0}), closure(0, 14, 6, {0, 0, 0})}, true)}));
     f.send(batch("lc", 4, {}, {}, {3}));
     f.send(batch("lc", 5, {}, {group(-1, A::MULTI_ASSOCIATION, {})}));  // refused: not journaled
     f.command(command_t::OPTIMIZE);
@@ -563,7 +673,8 @@ factor_t inter(int ra, std::int64_t a, int rb, std::int64_t b, Pose2 z, std::int
 std::vector<double> robotPose(Fixture& f, int robot, std::int64_t i) {
   std::vector<double> out;
   EXPECT_TRUE(f.engine.commonFramePose(
-      makeKey(static_cast<std::uint32_t>(robot), KeyKind::Pose, static_cast<std::uint64_t>(i)), out));
+      makeKey(static_cast<std::uint32_t>(robot), KeyKind::Pose, static_cast<std::uint64_t>(i)),
+      out));
   return out;
 }
 
@@ -574,7 +685,8 @@ double maxDiffTwoRobots(Fixture& a, Fixture& b) {
     for (int i = 0; i <= (r == 0 ? 16 : 8); ++i) {
       const auto x = robotPose(a, r, i), y = robotPose(b, r, i);
       if (x.size() != 3 || y.size() != 3) return 1e9;
-      d = std::max({d, std::hypot(x[0] - y[0], x[1] - y[1]), std::abs(std::remainder(x[2] - y[2], 2 * M_PI))});
+      d = std::max({d, std::hypot(x[0] - y[0], x[1] - y[1]),
+                    std::abs(std::remainder(x[2] - y[2], 2 * M_PI))});
     }
   return d;
 }
@@ -598,8 +710,10 @@ int anchoredFactors(const Fixture& f) {
 /// then sends a certain inter-robot closure: robot 1's pose 0 is 2 m left of robot 0's pose 0.
 void twoRobots(Fixture& x, bool join = true) {
   for (int i = 0; i < 16; ++i)
-    x.send(batch("a", ++x.seq, {odo(x.id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
-  for (int i = 0; i < 8; ++i) x.send(batch("b", i + 1, {odo(1000 + i, 1, i, i + 1, {0.97, -0.01, 0.01})}));
+    x.send(batch("a", ++x.seq,
+                 {odo(x.id++, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+  for (int i = 0; i < 8; ++i)
+    x.send(batch("b", i + 1, {odo(1000 + i, 1, i, i + 1, {0.97, -0.01, 0.01})}));
   if (join) x.send(batch("b", 9, {inter(0, 0, 1, 0, {0, 2, 0}, 2000)}));
 }
 
@@ -607,8 +721,8 @@ void twoRobots(Fixture& x, bool join = true) {
 /// pose 4 or pose 0, or robot 0's own pose 0 (decoys, one of them intra-robot), or none.
 A interGroup(std::int64_t id) {
   return group(id, A::MULTI_ASSOCIATION,
-               {inter(0, 2, 1, 4, {0, 2, 0}), inter(0, 2, 1, 2, {0, 2, 0}), closure(0, 2, 0, {0, 2, 0}),
-                inter(0, 2, 1, 0, {0, 2, 0})},
+               {inter(0, 2, 1, 4, {0, 2, 0}), inter(0, 2, 1, 2, {0, 2, 0}),
+                closure(0, 2, 0, {0, 2, 0}), inter(0, 2, 1, 0, {0, 2, 0})},
                true);
 }
 
@@ -715,7 +829,8 @@ TEST(AmbiguousInterRobot, AlternativeAsFirstLinkIsRefusedWhole) {
     EXPECT_EQ(e.code, loopd::error_t::INVALID_FIELD);
     EXPECT_EQ(e.channel, "T_FACTORS");
     EXPECT_NE(e.reason.find("joins robots 0 and 1"), std::string::npos) << e.reason;
-    EXPECT_NE(e.reason.find("send a certain inter-robot loop closure"), std::string::npos) << e.reason;
+    EXPECT_NE(e.reason.find("send a certain inter-robot loop closure"), std::string::npos)
+        << e.reason;
     status_t after = f.fullStatus();
     EXPECT_EQ(after.poses, before.poses) << solver;
     EXPECT_EQ(after.factors, before.factors) << solver;
@@ -743,16 +858,19 @@ TEST(AmbiguousInterRobot, AlternativeAsFirstLinkIsRefusedWhole) {
     }
 
     // Removing the only certain link in the batch that brings a group: refused again.
-    f.send(batch("lc", 3, {}, {group(41, A::MULTI_MEASUREMENT,
-                                     {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})},
-                 {2000}));
+    f.send(batch(
+        "lc", 3, {},
+        {group(41, A::MULTI_MEASUREMENT,
+               {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})},
+        {2000}));
     ASSERT_EQ(f.errors.size(), errorsBefore + 2) << solver;
     EXPECT_EQ(f.errors.back().factor_id, 41);
     EXPECT_EQ(f.fullStatus().ambiguous, 1) << solver;
     EXPECT_EQ(f.fullStatus().batches_rejected, before.batches_rejected + 2) << solver;
     // A robot no certain factor ever joined.
-    f.send(batch("lc", 4, {}, {group(42, A::MULTI_ASSOCIATION,
-                                     {inter(0, 6, 1, 4, {0, 0, 0}), inter(0, 6, 2, 4, {0, 0, 0})}, true)}));
+    f.send(batch("lc", 4, {},
+                 {group(42, A::MULTI_ASSOCIATION,
+                        {inter(0, 6, 1, 4, {0, 0, 0}), inter(0, 6, 2, 4, {0, 0, 0})}, true)}));
     ASSERT_EQ(f.errors.size(), errorsBefore + 3) << solver;
     EXPECT_NE(f.errors.back().reason.find("alternative 1 joins robots 0 and 2"), std::string::npos)
         << f.errors.back().reason;
@@ -760,7 +878,8 @@ TEST(AmbiguousInterRobot, AlternativeAsFirstLinkIsRefusedWhole) {
 }
 
 TEST(AmbiguousInterRobot, JournalResumeSwitchSolverAndRemoval) {
-  const std::string path = ::testing::TempDir() + "/" + std::to_string(getpid()) + "_amb_inter_journal.lcmlog";
+  const std::string path =
+      ::testing::TempDir() + "/" + std::to_string(getpid()) + "_amb_inter_journal.lcmlog";
   std::remove(path.c_str());
   status_t first;
   std::vector<std::vector<double>> poses;
@@ -770,14 +889,18 @@ TEST(AmbiguousInterRobot, JournalResumeSwitchSolverAndRemoval) {
     twoRobots(f);
     f.send(batch("lc", 1, {}, {interGroup(40)}));
     // Robot 1's pose 4 seen from robot 0's pose 6: 0 m (true) or 1.5 m ahead.
-    f.send(batch("lc", 2, {}, {group(41, A::MULTI_MEASUREMENT,
-                                     {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})}));
-    f.send(batch("lc", 3, {}, {group(42, A::MULTI_ASSOCIATION,
-                                     {inter(0, 4, 1, 6, {0, 0, 0}), inter(0, 4, 1, 8, {0, 0, 0})}, true)}));
+    f.send(batch(
+        "lc", 2, {},
+        {group(41, A::MULTI_MEASUREMENT,
+               {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})}));
+    f.send(batch("lc", 3, {},
+                 {group(42, A::MULTI_ASSOCIATION,
+                        {inter(0, 4, 1, 6, {0, 0, 0}), inter(0, 4, 1, 8, {0, 0, 0})}, true)}));
     f.send(batch("lc", 4, {}, {}, {42}));
     // Refused (robot 2 is in no common frame): not journaled.
-    f.send(batch("lc", 5, {}, {group(43, A::MULTI_ASSOCIATION,
-                                     {inter(0, 6, 1, 4, {0, 0, 0}), inter(0, 6, 2, 4, {0, 0, 0})}, true)}));
+    f.send(batch("lc", 5, {},
+                 {group(43, A::MULTI_ASSOCIATION,
+                        {inter(0, 6, 1, 4, {0, 0, 0}), inter(0, 6, 2, 4, {0, 0, 0})}, true)}));
     ASSERT_EQ(f.errors.size(), 1u);
     EXPECT_EQ(f.errors[0].factor_id, 43);
     f.command(command_t::OPTIMIZE);
@@ -813,8 +936,10 @@ TEST(AmbiguousInterRobot, JournalResumeSwitchSolverAndRemoval) {
   expectSwitchRoundTripKeeps(g, {{40, 1}, {41, 0}});
   // Removing a group after the resume, then one more under the (unchanged) link.
   g.send(batch("lc", 6, {}, {}, {41}));
-  g.send(batch("lc", 7, {}, {group(44, A::MULTI_MEASUREMENT,
-                                   {inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2}), inter(0, 6, 1, 4, {0, 0, -M_PI / 2})})}));
+  g.send(batch(
+      "lc", 7, {},
+      {group(44, A::MULTI_MEASUREMENT,
+             {inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2}), inter(0, 6, 1, 4, {0, 0, -M_PI / 2})})}));
   g.command(command_t::OPTIMIZE);
   EXPECT_TRUE(g.errors.empty()) << g.errors[0].reason;
   s = g.fullStatus();
@@ -838,14 +963,18 @@ TEST(AmbiguousInterRobot, RemovingTheCertainLinkKeepsTheGroupSolvable) {
     EXPECT_EQ(s.ambiguous, 1) << solver;
     EXPECT_TRUE(std::isfinite(s.chi2) && s.chi2 >= 0.0) << solver;
     ASSERT_NE(f.decision(s, 40), nullptr);
-    f.send(batch("lc", 2, {}, {group(41, A::MULTI_MEASUREMENT,
-                                     {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})}));
+    f.send(batch(
+        "lc", 2, {},
+        {group(41, A::MULTI_MEASUREMENT,
+               {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})}));
     ASSERT_EQ(f.errors.size(), 1u) << solver;
     EXPECT_EQ(f.errors.back().factor_id, 41);
     // A new certain link joins them again: the group is accepted.
     f.send(batch("b", 11, {inter(0, 0, 1, 0, {0, 2, 0}, 2001)}));
-    f.send(batch("lc", 3, {}, {group(41, A::MULTI_MEASUREMENT,
-                                     {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})}));
+    f.send(batch(
+        "lc", 3, {},
+        {group(41, A::MULTI_MEASUREMENT,
+               {inter(0, 6, 1, 4, {0, 0, -M_PI / 2}), inter(0, 6, 1, 4, {1.5, 0, -M_PI / 2})})}));
     f.command(command_t::OPTIMIZE);
     EXPECT_EQ(f.errors.size(), 1u) << solver << ": " << f.errors.back().reason;
     s = f.fullStatus();
@@ -859,9 +988,8 @@ TEST(AmbiguousInterRobot, RemovingTheCertainLinkKeepsTheGroupSolvable) {
   }
 }
 
-
-factor_t between3(int ra, std::int64_t a, int rb, std::int64_t b, Eigen::Vector3d t, std::int8_t role,
-                  std::int64_t id = 0) {
+factor_t between3(int ra, std::int64_t a, int rb, std::int64_t b, Eigen::Vector3d t,
+                  std::int8_t role, std::int64_t id = 0) {
   client::Pose3 z;
   z.t = t;
   factor_t f = client::loopClosureFactor(KeyRef::pose(ra, a), KeyRef::pose(rb, b), z,
@@ -875,13 +1003,17 @@ TEST(AmbiguousInterRobot, Se3AlternativesGoThroughTheAnchorsToo) {
   const std::int8_t lc = factor_t::ROLE_LOOP_CLOSURE, od = factor_t::ROLE_ODOMETRY;
   Fixture f("mh"), ref("isam2");
   for (Fixture* x : {&f, &ref}) {
-    for (int i = 0; i < 6; ++i) x->send(batch("a", i + 1, {between3(0, i, 0, i + 1, {1.0, 0.01, 0}, od, i)}));
-    for (int i = 0; i < 6; ++i) x->send(batch("b", i + 1, {between3(1, i, 1, i + 1, {1.03, 0, 0.01}, od, 100 + i)}));
+    for (int i = 0; i < 6; ++i)
+      x->send(batch("a", i + 1, {between3(0, i, 0, i + 1, {1.0, 0.01, 0}, od, i)}));
+    for (int i = 0; i < 6; ++i)
+      x->send(batch("b", i + 1, {between3(1, i, 1, i + 1, {1.03, 0, 0.01}, od, 100 + i)}));
     x->send(batch("b", 7, {between3(0, 0, 1, 0, {0, 2, 0}, lc, 200)}));
   }
   // Robot 1's pose 4 seen from robot 0's pose 4: 2 m to the left (true) or also 1.5 m ahead.
-  f.send(batch("lc", 1, {}, {group(40, A::MULTI_MEASUREMENT,
-                                   {between3(0, 4, 1, 4, {1.5, 2, 0}, lc), between3(0, 4, 1, 4, {0, 2, 0}, lc)})}));
+  f.send(
+      batch("lc", 1, {},
+            {group(40, A::MULTI_MEASUREMENT,
+                   {between3(0, 4, 1, 4, {1.5, 2, 0}, lc), between3(0, 4, 1, 4, {0, 2, 0}, lc)})}));
   ref.send(batch("lc", 1, {between3(0, 4, 1, 4, {0, 2, 0}, lc, 40)}));
   f.command(command_t::OPTIMIZE);
   ref.command(command_t::OPTIMIZE);
@@ -909,7 +1041,6 @@ TEST(AmbiguousInterRobot, Se3AlternativesGoThroughTheAnchorsToo) {
   EXPECT_NEAR(b[1] - a[1], 2.0, 0.15);
   EXPECT_NEAR(s.chi2, ref.fullStatus().chi2, 1e-6 * (1 + s.chi2));
 }
-
 
 // --- the same as loopd-solve --solver mh --incremental -------------------------------------
 
@@ -953,8 +1084,8 @@ TEST(AmbiguousEngine, MatchesLoopdSolveMhOnAnAmbiguousDataset) {
                      "--null", "--out", amb, "--truth", truth},
                     tmp("outliers.log")),
             0);
-  ASSERT_EQ(runTool({kSolve, amb, "--solver", "mh", "--incremental", "--stats", stats, "--out",
-                     est, "--quiet"},
+  ASSERT_EQ(runTool({kSolve, amb, "--solver", "mh", "--incremental", "--stats", stats, "--out", est,
+                     "--quiet"},
                     tmp("solve.log")),
             0);
   const std::vector<int> solveChosen = jsonInts(stats, "chosen");
@@ -965,7 +1096,8 @@ TEST(AmbiguousEngine, MatchesLoopdSolveMhOnAnAmbiguousDataset) {
   const io::Dataset ds = io::readDataset(amb);
   std::vector<int> groupOf(ds.edges.size(), -1);
   for (size_t g = 0; g < ds.hypotheses.size(); ++g)
-    for (int k = 0; k < ds.hypotheses[g].count; ++k) groupOf[ds.hypotheses[g].firstEdge + k] = static_cast<int>(g);
+    for (int k = 0; k < ds.hypotheses[g].count; ++k)
+      groupOf[ds.hypotheses[g].firstEdge + k] = static_cast<int>(g);
   std::map<std::int64_t, factor_batch_t> byPose;
   for (size_t i = 0; i < ds.edges.size(); ++i) {
     if (groupOf[i] >= 0) continue;
@@ -983,7 +1115,8 @@ TEST(AmbiguousEngine, MatchesLoopdSolveMhOnAnAmbiguousDataset) {
       due = std::max({due, e.from, e.to});
     }
     // Group ids after every edge index, in file order.
-    byPose[due].ambiguous.push_back(group(100000 + static_cast<std::int64_t>(g), A::MULTI_ASSOCIATION, alts, h.null));
+    byPose[due].ambiguous.push_back(
+        group(100000 + static_cast<std::int64_t>(g), A::MULTI_ASSOCIATION, alts, h.null));
   }
   Fixture f("mh");
   bool first = true;
@@ -1028,8 +1161,9 @@ TEST(AmbiguousEngine, MatchesLoopdSolveMhOnAnAmbiguousDataset) {
   EXPECT_LT(dt, 2e-3);
   EXPECT_LT(dr, 2e-4);
   EXPECT_NEAR(s.chi2, statsChi2(stats), 1e-4 * statsChi2(stats));
-  std::printf("    chosen %zu/%zu as loopd-solve, max |dt| %.2e m, |dtheta| %.2e rad, chi2 %.6f vs %.6f\n",
-              serverChosen.size(), solveChosen.size(), dt, dr, s.chi2, statsChi2(stats));
+  std::printf(
+      "    chosen %zu/%zu as loopd-solve, max |dt| %.2e m, |dtheta| %.2e rad, chi2 %.6f vs %.6f\n",
+      serverChosen.size(), solveChosen.size(), dt, dr, s.chi2, statsChi2(stats));
 }
 
 TEST(AmbiguousServerConfig, MaxHypothesesFlagAndFile) {
@@ -1049,7 +1183,6 @@ TEST(AmbiguousServerConfig, MaxHypothesesFlagAndFile) {
   EXPECT_EQ(parseServerConfig({"--config", cfg, "--max-hypotheses", "2"}).maxHypotheses, 2);
   std::remove(cfg.c_str());
 }
-
 
 // --- over LCM: loopd --solver mh and the client library ------------------------------------
 
@@ -1072,17 +1205,21 @@ TEST(AmbiguousLive, ClientGroupThroughLoopdMh) {
     if (s.request_id == 42) replies.push_back(s);
   });
   std::map<int, int> hypothesisChunks;
-  lcm.subscribeFunction("LOOPD_ESTIMATE", +[](const lcm::ReceiveBuffer*, const std::string&, const estimate_t* m,
-                                      std::map<int, int>* n) {
-    if (m->request_id == 42) ++(*n)[m->hypothesis];
-  }, &hypothesisChunks);
+  lcm.subscribeFunction(
+      "LOOPD_ESTIMATE",
+      +[](const lcm::ReceiveBuffer*, const std::string&, const estimate_t* m,
+          std::map<int, int>* n) {
+        if (m->request_id == 42) ++(*n)[m->hypothesis];
+      },
+      &hypothesisChunks);
   auto pump = [&](int ms) {
     const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
     while (std::chrono::steady_clock::now() < end) lcm.handleTimeout(20);
   };
   pump(300);
   for (int i = 0; i < 16; ++i) {
-    pub.odometry(0, i, i + 1, Pose2{1, 0, (i % 4 == 3) ? M_PI / 2 : 0.0}, Eigen::Vector3d(1, 1, 10).asDiagonal());
+    pub.odometry(0, i, i + 1, Pose2{1, 0, (i % 4 == 3) ? M_PI / 2 : 0.0},
+                 Eigen::Vector3d(1, 1, 10).asDiagonal());
     pub.flush();
     pump(30);
   }
@@ -1097,14 +1234,20 @@ TEST(AmbiguousLive, ClientGroupThroughLoopdMh) {
   const std::int64_t open = pub.ambiguous(
       A::MULTI_MEASUREMENT,
       {client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0), Pose2{4, 4, M_PI}, kInfo),
-       client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0), Pose2{4.6, 4, M_PI}, kInfo)},
+       client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0), Pose2{4.6, 4, M_PI},
+                                 kInfo)},
       false);
   // The client refuses what the server would.
-  EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT, {client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0), Pose2{}, kInfo)}, false),
+  EXPECT_THROW(pub.ambiguous(A::MULTI_MEASUREMENT,
+                             {client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0),
+                                                        Pose2{}, kInfo)},
+                             false),
                std::invalid_argument);
   EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION,
-                             {client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0), Pose2{}, kInfo),
-                              client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 4), Pose2{1, 0, 0}, kInfo)},
+                             {client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 0),
+                                                        Pose2{}, kInfo),
+                              client::loopClosureFactor(KeyRef::pose(0, 8), KeyRef::pose(0, 4),
+                                                        Pose2{1, 0, 0}, kInfo)},
                              false),
                std::invalid_argument);
   EXPECT_THROW(pub.ambiguous(A::MULTI_ASSOCIATION, {}, true, -1.0), std::invalid_argument);
@@ -1178,7 +1321,8 @@ TEST(AmbiguousLive, InterRobotGroupRefusedThenAcceptedSurvivesKillNine) {
     status_t out = replies.front();
     for (size_t i = 1; i < replies.size(); ++i)
       if (replies[i].decisions_full && replies[i].decisions_chunk_index > 0)
-        out.decisions.insert(out.decisions.end(), replies[i].decisions.begin(), replies[i].decisions.end());
+        out.decisions.insert(out.decisions.end(), replies[i].decisions.begin(),
+                             replies[i].decisions.end());
     return out;
   };
   auto groupDecision = [](const status_t& s, std::int64_t gid) -> const loop_decision_t* {
@@ -1187,15 +1331,17 @@ TEST(AmbiguousLive, InterRobotGroupRefusedThenAcceptedSurvivesKillNine) {
     return nullptr;
   };
   {
-    Proc srv = Proc::start({kLoopd, "--lcm-url", url, "--solver", "mh", "--journal", journal,
-                            "--idle-seconds", "0.2"},
-                           tmp("amb_inter_srv1.log"));
+    Proc srv = Proc::start(
+        {kLoopd, "--lcm-url", url, "--solver", "mh", "--journal", journal, "--idle-seconds", "0.2"},
+        tmp("amb_inter_srv1.log"));
     std::this_thread::sleep_for(std::chrono::milliseconds(400));
     ASSERT_TRUE(srv.alive()) << srv.output();
     pump(200);
     for (int i = 0; i < 16; ++i)
-      send(batch("a", i + 1, {odo(i, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
-    for (int i = 0; i < 8; ++i) send(batch("b", i + 1, {odo(1000 + i, 1, i, i + 1, {0.97, -0.01, 0.01})}));
+      send(batch("a", i + 1,
+                 {odo(i, 0, i, i + 1, {1.03, 0.01, (i % 4 == 3) ? M_PI / 2 + 0.02 : 0.0})}));
+    for (int i = 0; i < 8; ++i)
+      send(batch("b", i + 1, {odo(1000 + i, 1, i, i + 1, {0.97, -0.01, 0.01})}));
     // The group as the first link between the robots: refused, nothing applied.
     send(batch("lc", 1, {closure(0, 16, 0, {0, 0, 0}, 50)}, {interGroup(40)}));
     pump(400);
@@ -1206,7 +1352,8 @@ TEST(AmbiguousLive, InterRobotGroupRefusedThenAcceptedSurvivesKillNine) {
     EXPECT_EQ(e.factor_id, 40);
     EXPECT_EQ(e.code, loopd::error_t::INVALID_FIELD);
     EXPECT_EQ(e.channel, "LOOPD_FACTORS");
-    EXPECT_NE(e.reason.find("send a certain inter-robot loop closure"), std::string::npos) << e.reason;
+    EXPECT_NE(e.reason.find("send a certain inter-robot loop closure"), std::string::npos)
+        << e.reason;
     ASSERT_TRUE(srv.alive());
     status_t s = requestStatus();
     EXPECT_EQ(s.ambiguous, 0);
@@ -1224,7 +1371,8 @@ TEST(AmbiguousLive, InterRobotGroupRefusedThenAcceptedSurvivesKillNine) {
     EXPECT_EQ(groupDecision(s, 40)->alternative, 1);
     EXPECT_EQ(sub.errorsReceived(), 1);
     srv.kill(SIGKILL);
-    EXPECT_NE(srv.output().find("send a certain inter-robot loop closure"), std::string::npos) << srv.output();
+    EXPECT_NE(srv.output().find("send a certain inter-robot loop closure"), std::string::npos)
+        << srv.output();
   }
   Proc srv = Proc::start({kLoopd, "--lcm-url", url, "--solver", "mh", "--journal", journal,
                           "--resume", journal, "--idle-seconds", "0.2"},

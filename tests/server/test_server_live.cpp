@@ -31,7 +31,8 @@ const Offline& offline(const std::string& dataset) {
   auto it = cache.find(dataset);
   if (it != cache.end()) return it->second;
   const std::string est = tmp("offline_est.g2o"), stats = tmp("offline_stats.json");
-  EXPECT_EQ(runTool({kSolve, dataset, "--out", est, "--stats", stats, "--quiet"}, tmp("solve.log")), 0);
+  EXPECT_EQ(runTool({kSolve, dataset, "--out", est, "--stats", stats, "--quiet"}, tmp("solve.log")),
+            0);
   return cache[dataset] = Offline{statsChi2(stats), readVertices(est)};
 }
 
@@ -44,8 +45,8 @@ Proc server(const std::string& url, const std::vector<std::string>& extra, const
   return p;
 }
 
-void expectMatchesOffline(const std::string& dataset, const std::string& listenOut, const std::string& est,
-                          size_t poses) {
+void expectMatchesOffline(const std::string& dataset, const std::string& listenOut,
+                          const std::string& est, size_t poses) {
   const Offline& off = offline(dataset);
   const double chi2 = listenedChi2(listenOut);
   EXPECT_NEAR(chi2, off.chi2, 1e-6 * off.chi2) << listenOut;
@@ -54,7 +55,8 @@ void expectMatchesOffline(const std::string& dataset, const std::string& listenO
   const auto [dt, dr] = maxDifference(got, off.poses);
   EXPECT_LT(dt, 2e-3) << "max position difference";
   EXPECT_LT(dr, 2e-4) << "max heading difference";
-  std::printf("    chi2 %.9f (offline %.9f), max |dt| %.2e m, |dtheta| %.2e rad\n", chi2, off.chi2, dt, dr);
+  std::printf("    chi2 %.9f (offline %.9f), max |dt| %.2e m, |dtheta| %.2e rad\n", chi2, off.chi2,
+              dt, dr);
 }
 
 TEST(ServerLive, IntelMatchesOfflineSolve) {
@@ -88,7 +90,8 @@ TEST(ServerLive, FourRobotCity10000EndsInOneFrameAtTheOptimum) {
   ASSERT_EQ(listen.wait(180 * kSlowdown), 0) << listen.output();
   srv.kill(SIGTERM);
   EXPECT_EQ(srv.wait(30), 0) << srv.output();
-  EXPECT_NE(listen.output().find("4 robots, 4 in a common frame"), std::string::npos) << listen.output();
+  EXPECT_NE(listen.output().find("4 robots, 4 in a common frame"), std::string::npos)
+      << listen.output();
   expectMatchesOffline(data, listen.output(), est, 10000);
 }
 
@@ -107,7 +110,8 @@ TEST(ServerLive, LogplayerReplayGivesTheSameResult) {
   ASSERT_EQ(listen.wait(60), 0) << listen.output();
   srv.kill(SIGINT);
   EXPECT_EQ(srv.wait(20), 0);
-  EXPECT_NE(listen.output().find("2 robots, 2 in a common frame"), std::string::npos) << listen.output();
+  EXPECT_NE(listen.output().find("2 robots, 2 in a common frame"), std::string::npos)
+      << listen.output();
   expectMatchesOffline(data, listen.output(), est, 1728);
 }
 
@@ -118,7 +122,8 @@ TEST(ServerLive, KillNineResumeFeedTheRestLosesNothing) {
   std::remove(journal.c_str());
   {
     Proc srv = server(url, {"--journal", journal}, tmp("srv1.log"));
-    Proc feed = Proc::start({kFeed, data, "--lcm-url", url, "--rate", "1500", "--quiet"}, tmp("feed1.log"));
+    Proc feed =
+        Proc::start({kFeed, data, "--lcm-url", url, "--rate", "1500", "--quiet"}, tmp("feed1.log"));
     std::this_thread::sleep_for(std::chrono::milliseconds(600));
     srv.kill(SIGKILL);  // in the middle
     ASSERT_EQ(feed.wait(30), 0);
@@ -129,7 +134,8 @@ TEST(ServerLive, KillNineResumeFeedTheRestLosesNothing) {
   Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", quietFor(2)},
                             tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url, "--quiet"}, tmp("feed2.log")), 0);  // everything again
+  ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url, "--quiet"}, tmp("feed2.log")),
+            0);  // everything again
   ASSERT_EQ(listen.wait(60), 0) << listen.output();
   srv.kill(SIGTERM);
   EXPECT_EQ(srv.wait(20), 0);
@@ -154,12 +160,15 @@ TEST(ServerLive, DuplicateFeedIsAppliedOnce) {
   Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", quietFor(2)},
                             tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url, "--poses", "500", "--quiet"}, tmp("feed1.log")), 0);
-  ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url, "--poses", "500", "--quiet"}, tmp("feed2.log")), 0);
+  ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url, "--poses", "500", "--quiet"}, tmp("feed1.log")),
+            0);
+  ASSERT_EQ(runTool({kFeed, data, "--lcm-url", url, "--poses", "500", "--quiet"}, tmp("feed2.log")),
+            0);
   ASSERT_EQ(listen.wait(60), 0) << listen.output();
   srv.kill(SIGINT);
   EXPECT_EQ(srv.wait(20), 0);
-  EXPECT_NE(listen.output().find("500 batches accepted, 500 duplicate, 0 rejected"), std::string::npos)
+  EXPECT_NE(listen.output().find("500 batches accepted, 500 duplicate, 0 rejected"),
+            std::string::npos)
       << listen.output();
 }
 
@@ -170,7 +179,8 @@ factor_t odo(std::int64_t id, int robot, std::int64_t a, double x = 1.0) {
   f.id = id;
   f.type = factor_t::BETWEEN_SE2;
   f.role = factor_t::ROLE_ODOMETRY;
-  f.keys = {client::wireKey(client::KeyRef::pose(robot, a)), client::wireKey(client::KeyRef::pose(robot, a + 1))};
+  f.keys = {client::wireKey(client::KeyRef::pose(robot, a)),
+            client::wireKey(client::KeyRef::pose(robot, a + 1))};
   f.num_keys = 2;
   f.measurement = {x, 0.1, 0.05};
   f.num_measurement = 3;
@@ -181,7 +191,8 @@ factor_t odo(std::int64_t id, int robot, std::int64_t a, double x = 1.0) {
   return f;
 }
 
-std::vector<uint8_t> encodeBatch(const std::string& sender, std::int64_t seq, std::vector<factor_t> fs,
+std::vector<uint8_t> encodeBatch(const std::string& sender, std::int64_t seq,
+                                 std::vector<factor_t> fs,
                                  std::vector<std::int64_t> removals = {}) {
   factor_batch_t b{};
   b.sender = sender;
@@ -228,7 +239,8 @@ TEST(ServerLive, FuzzedFactorChannelLeavesServerAliveAndGraphIntact) {
     if (i % 2 == 0 && junk.size() > 8) std::copy(valid.begin(), valid.begin() + 8, junk.begin());
     publish(junk);
     ++expectedErrors;
-    std::vector<uint8_t> cut(valid.begin(), valid.begin() + static_cast<long>(rng() % (valid.size() - 1)));
+    std::vector<uint8_t> cut(valid.begin(),
+                             valid.begin() + static_cast<long>(rng() % (valid.size() - 1)));
     publish(cut);
     ++expectedErrors;
   }
@@ -250,11 +262,17 @@ TEST(ServerLive, FuzzedFactorChannelLeavesServerAliveAndGraphIntact) {
   bad([&](factor_t& f) { f.measurement[0] = nan; });
   bad([&](factor_t& f) { f.noise[3] = std::numeric_limits<double>::infinity(); });
   bad([&](factor_t& f) { f.noise = {1, 0, 0, -1, 0, 1}; });
-  bad([&](factor_t& f) { f.noise.resize(3); f.num_noise = 3; });
-  bad([&](factor_t& f) { f.measurement.resize(7, 0.0); f.num_measurement = 7; });
+  bad([&](factor_t& f) {
+    f.noise.resize(3);
+    f.num_noise = 3;
+  });
+  bad([&](factor_t& f) {
+    f.measurement.resize(7, 0.0);
+    f.num_measurement = 7;
+  });
   bad([&](factor_t& f) { f.keys[1].kind = loopd::key_t::LANDMARK; });
   bad([&](factor_t& f) { f.type = 77; });
-  bad([&](factor_t& f) { f.id = 3; });  // an id "good" already used
+  bad([&](factor_t& f) { f.id = 3; });                // an id "good" already used
   publish(encodeBatch("good", ++seq, {}, {424242}));  // unknown removal id
   ++expectedErrors;
   pump(1.5);

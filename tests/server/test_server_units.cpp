@@ -5,9 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
-#include <thread>
 #include <limits>
 #include <random>
+#include <thread>
 
 #include "client/factor_publisher.h"
 #include "loopd/command_t.hpp"
@@ -76,9 +76,21 @@ struct EngineFixture {
   explicit EngineFixture(const std::string& solver = "lm", double holdSeconds = 30)
       : pub(Channels::withPrefix("T_"),
             [this](const std::string& ch, const std::vector<uint8_t>& b) {
-              if (ch == "T_ERROR") { loopd::error_t m; m.decode(b.data(), 0, static_cast<int>(b.size())); out.errors.push_back(m); }
-              if (ch == "T_STATUS") { status_t m; m.decode(b.data(), 0, static_cast<int>(b.size())); out.statuses.push_back(m); }
-              if (ch == "T_ESTIMATE") { estimate_t m; m.decode(b.data(), 0, static_cast<int>(b.size())); out.estimates.push_back(m); }
+              if (ch == "T_ERROR") {
+                loopd::error_t m;
+                m.decode(b.data(), 0, static_cast<int>(b.size()));
+                out.errors.push_back(m);
+              }
+              if (ch == "T_STATUS") {
+                status_t m;
+                m.decode(b.data(), 0, static_cast<int>(b.size()));
+                out.statuses.push_back(m);
+              }
+              if (ch == "T_ESTIMATE") {
+                estimate_t m;
+                m.decode(b.data(), 0, static_cast<int>(b.size()));
+                out.estimates.push_back(m);
+              }
               if (ch == "T_COVARIANCE") ++out.covariances;
             }),
         engine(options(solver, holdSeconds), pub, nullptr) {}
@@ -89,8 +101,14 @@ struct EngineFixture {
     o.publishEvery = 0;
     return o;
   }
-  void send(const factor_batch_t& b) { engine.post({"T_FACTORS", encode(b)}); engine.step(); }
-  void sendRaw(std::vector<uint8_t> bytes) { engine.post({"T_FACTORS", std::move(bytes)}); engine.step(); }
+  void send(const factor_batch_t& b) {
+    engine.post({"T_FACTORS", encode(b)});
+    engine.step();
+  }
+  void sendRaw(std::vector<uint8_t> bytes) {
+    engine.post({"T_FACTORS", std::move(bytes)});
+    engine.step();
+  }
   void command(int8_t c, const std::string& arg = "", std::vector<loopd::key_t> keys = {}) {
     command_t m{};
     m.sender = "test";
@@ -110,8 +128,10 @@ struct EngineFixture {
 };
 
 // A chain of odometry for robot r from index `from` to `to`, one batch per pose.
-void chain(EngineFixture& f, const std::string& sender, int r, int from, int to, std::int64_t& seq, std::int64_t& id) {
-  for (int i = from; i < to; ++i) f.send(batch(sender, ++seq, {between2(id++, r, i, r, i + 1, {1, 0, 0.1})}));
+void chain(EngineFixture& f, const std::string& sender, int r, int from, int to, std::int64_t& seq,
+           std::int64_t& id) {
+  for (int i = from; i < to; ++i)
+    f.send(batch(sender, ++seq, {between2(id++, r, i, r, i + 1, {1, 0, 0.1})}));
 }
 
 // --- validator ----------------------------------------------------------------------------
@@ -124,25 +144,44 @@ TEST(FactorBatchValidator, AcceptsWellFormedBatch) {
 TEST(FactorBatchValidator, ReportsEachProblemWithItsCode) {
   FactorBatchValidator v;
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  struct Case { std::function<void(factor_t&)> mutate; int8_t code; };
+  struct Case {
+    std::function<void(factor_t&)> mutate;
+    int8_t code;
+  };
   const std::vector<Case> cases = {
       {[&](factor_t& f) { f.measurement[1] = nan; }, loopd::error_t::NON_FINITE},
-      {[&](factor_t& f) { f.noise[0] = std::numeric_limits<double>::infinity(); }, loopd::error_t::NON_FINITE},
+      {[&](factor_t& f) { f.noise[0] = std::numeric_limits<double>::infinity(); },
+       loopd::error_t::NON_FINITE},
       {[&](factor_t& f) { f.noise = {1, 0, 0, -1, 0, 1}; }, loopd::error_t::NOT_POSITIVE_DEFINITE},
       {[&](factor_t& f) { f.noise = {1, 2, 0, 1, 0, 1}; }, loopd::error_t::NOT_POSITIVE_DEFINITE},
-      {[&](factor_t& f) { f.noise.pop_back(); f.num_noise = 5; }, loopd::error_t::WRONG_DIMENSION},
-      {[&](factor_t& f) { f.measurement.pop_back(); f.num_measurement = 2; }, loopd::error_t::WRONG_DIMENSION},
-      {[&](factor_t& f) { f.keys.pop_back(); f.num_keys = 1; }, loopd::error_t::WRONG_DIMENSION},
-      {[&](factor_t& f) { f.keys[1].kind = loopd::key_t::LANDMARK; }, loopd::error_t::WRONG_KEY_KIND},
+      {[&](factor_t& f) {
+         f.noise.pop_back();
+         f.num_noise = 5;
+       },
+       loopd::error_t::WRONG_DIMENSION},
+      {[&](factor_t& f) {
+         f.measurement.pop_back();
+         f.num_measurement = 2;
+       },
+       loopd::error_t::WRONG_DIMENSION},
+      {[&](factor_t& f) {
+         f.keys.pop_back();
+         f.num_keys = 1;
+       },
+       loopd::error_t::WRONG_DIMENSION},
+      {[&](factor_t& f) { f.keys[1].kind = loopd::key_t::LANDMARK; },
+       loopd::error_t::WRONG_KEY_KIND},
       {[&](factor_t& f) { f.keys[1].kind = 5; }, loopd::error_t::INVALID_FIELD},
       {[&](factor_t& f) { f.type = 42; }, loopd::error_t::INVALID_FIELD},
       {[&](factor_t& f) { f.role = factor_t::ROLE_PRIOR; }, loopd::error_t::INVALID_FIELD},
       {[&](factor_t& f) { f.robust = "bogus"; }, loopd::error_t::INVALID_FIELD},
-      {[&](factor_t& f) { f.robust = "dcs"; }, loopd::error_t::INVALID_FIELD},  // odometry is trusted
+      {[&](factor_t& f) { f.robust = "dcs"; },
+       loopd::error_t::INVALID_FIELD},  // odometry is trusted
       {[&](factor_t& f) { f.robust_param = -1; }, loopd::error_t::INVALID_FIELD},
       {[&](factor_t& f) { f.noise_kind = 0; }, loopd::error_t::INVALID_FIELD},
       {[&](factor_t& f) { f.id = -3; }, loopd::error_t::INVALID_FIELD},
-      {[&](factor_t& f) { f.keys[1].robot = 3; }, loopd::error_t::INVALID_FIELD},  // odometry across robots
+      {[&](factor_t& f) { f.keys[1].robot = 3; },
+       loopd::error_t::INVALID_FIELD},  // odometry across robots
   };
   for (size_t i = 0; i < cases.size(); ++i) {
     factor_t f = between2(5, 0, 0, 0, 1, {1, 0, 0});
@@ -160,7 +199,8 @@ TEST(FactorBatchValidator, BatchLevelChecks) {
   EXPECT_EQ(v.check(batch("", 1, {})).at(0).code, loopd::error_t::INVALID_FIELD);
   EXPECT_EQ(v.check(batch(std::string(64, 'x'), 1, {})).at(0).code, loopd::error_t::LIMIT_EXCEEDED);
   EXPECT_EQ(v.check(batch("a", 0, {})).at(0).code, loopd::error_t::INVALID_FIELD);
-  auto dup = batch("a", 1, {between2(3, 0, 0, 0, 1, {1, 0, 0}), between2(3, 0, 1, 0, 2, {1, 0, 0})});
+  auto dup =
+      batch("a", 1, {between2(3, 0, 0, 0, 1, {1, 0, 0}), between2(3, 0, 1, 0, 2, {1, 0, 0})});
   EXPECT_EQ(v.check(dup).at(0).code, loopd::error_t::DUPLICATE_FACTOR_ID);
   std::vector<factor_t> many;
   for (int i = 0; i < 201; ++i) many.push_back(between2(i, 0, i, 0, i + 1, {1, 0, 0}));
@@ -250,7 +290,8 @@ void checkJacobians(const FactorT& f, Values& v, double tol) {
       for (int row = 0; row < d; ++row) {
         const double num = (rp[static_cast<size_t>(row)] - rm[static_cast<size_t>(row)]) / (2 * h);
         const double ana = J[static_cast<size_t>(k)][static_cast<size_t>(c * d + row)];
-        EXPECT_NEAR(ana, num, tol * std::max(1.0, std::abs(num))) << "key " << k << " col " << c << " row " << row;
+        EXPECT_NEAR(ana, num, tol * std::max(1.0, std::abs(num)))
+            << "key " << k << " col " << c << " row " << row;
       }
     }
   }
@@ -261,8 +302,8 @@ TEST(AnchoredBetweenFactor, SE2JacobiansMatchNumerical) {
   std::uniform_real_distribution<double> u(-2, 2);
   for (int trial = 0; trial < 20; ++trial) {
     Values v;
-    const Key ar = makeKey(0, KeyKind::Anchor, 0), xr = poseKey(5, 0), as = makeKey(1, KeyKind::Anchor, 0),
-              xs = poseKey(9, 1);
+    const Key ar = makeKey(0, KeyKind::Anchor, 0), xr = poseKey(5, 0),
+              as = makeKey(1, KeyKind::Anchor, 0), xs = poseKey(9, 1);
     v.insert(ar, SE2(u(rng), u(rng), u(rng)));
     v.insert(xr, SE2(u(rng), u(rng), u(rng)));
     v.insert(as, SE2(u(rng), u(rng), u(rng)));
@@ -284,8 +325,8 @@ TEST(AnchoredBetweenFactor, SE3JacobiansMatchNumerical) {
   };
   for (int trial = 0; trial < 20; ++trial) {
     Values v;
-    const Key ar = makeKey(0, KeyKind::Anchor, 0), xr = poseKey(5, 0), as = makeKey(1, KeyKind::Anchor, 0),
-              xs = poseKey(9, 1);
+    const Key ar = makeKey(0, KeyKind::Anchor, 0), xr = poseKey(5, 0),
+              as = makeKey(1, KeyKind::Anchor, 0), xs = poseKey(9, 1);
     v.insert(ar, rnd());
     v.insert(xr, rnd());
     v.insert(as, rnd());
@@ -302,7 +343,8 @@ TEST(AnchoredBetweenFactor, EqualsPlainBetweenOfCommonFramePoses) {
   const SE2 Ar(1, 2, 0.3), xr(0.5, -1, 0.2), As(-3, 1, -1), xs(2, 2, 0.7), Z(0.4, 0.1, -0.2);
   Eigen::Matrix3d info = Eigen::Matrix3d::Identity() * 5;
   Values v;
-  const Key ar = makeKey(0, KeyKind::Anchor, 0), pr = poseKey(1, 0), as = makeKey(1, KeyKind::Anchor, 0), ps = poseKey(1, 1);
+  const Key ar = makeKey(0, KeyKind::Anchor, 0), pr = poseKey(1, 0),
+            as = makeKey(1, KeyKind::Anchor, 0), ps = poseKey(1, 1);
   v.insert(ar, Ar);
   v.insert(pr, xr);
   v.insert(as, As);
@@ -419,7 +461,8 @@ TEST(Engine, RemovalsAndCommands) {
   f.send(rm);  // removed already
   EXPECT_EQ(f.out.errors.back().code, loopd::error_t::UNKNOWN_FACTOR_ID);
 
-  f.command(command_t::REQUEST_COVARIANCE, "joint", {client::wireKey(KeyRef::pose(0, 1)), client::wireKey(KeyRef::pose(0, 2))});
+  f.command(command_t::REQUEST_COVARIANCE, "joint",
+            {client::wireKey(KeyRef::pose(0, 1)), client::wireKey(KeyRef::pose(0, 2))});
   f.command(command_t::REQUEST_COVARIANCE, "", {client::wireKey(KeyRef::pose(0, 99))});
   EXPECT_EQ(f.out.errors.back().code, loopd::error_t::UNKNOWN_KEY);
   EXPECT_EQ(f.out.errors.back().request_id, 7);
@@ -645,7 +688,8 @@ TEST(Engine, WholeGraphSchemesPerFactorOnlyAsTheSolver) {
   ASSERT_EQ(f.out.errors.size(), 1u);
   EXPECT_EQ(f.out.errors[0].code, loopd::error_t::INVALID_FIELD);
   EXPECT_NE(std::string(f.out.errors[0].reason).find("whole-graph scheme"), std::string::npos);
-  EXPECT_EQ(f.engine.backend().graph().size(), 40u);  // the walk and its prior: nothing of the batch
+  EXPECT_EQ(f.engine.backend().graph().size(),
+            40u);  // the walk and its prior: nothing of the batch
   EngineFixture r("risam");
   rigidWalkWithWrongClosure(r, "risam");
   EXPECT_TRUE(r.out.errors.empty());
@@ -720,7 +764,8 @@ TEST(ServerConfig, FlagsFileAndDefaults) {
   EXPECT_EQ(parseServerConfig({}).solver, defaultSolver());
   EXPECT_THROW(parseServerConfig({"--solver", "nope"}), std::invalid_argument);
   EXPECT_THROW(parseServerConfig({"--bogus", "1"}), std::invalid_argument);
-  EXPECT_EQ(effectiveLcmUrl("udpm://239.255.76.67:7667?ttl=0"), "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304");
+  EXPECT_EQ(effectiveLcmUrl("udpm://239.255.76.67:7667?ttl=0"),
+            "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304");
   EXPECT_EQ(effectiveLcmUrl("memq://"), "memq://");
 }
 

@@ -28,7 +28,9 @@ std::vector<factor_batch_t> readLog(const std::string& path) {
 
 TEST(LoopdFeed, LogHasOneBatchPerPoseNumberedPerSender) {
   const std::string log = tmp("w100.lcmlog");
-  ASSERT_EQ(runTool({kFeed, kData + "/intel.g2o", "--robots", "3", "--log", log, "--quiet"}, tmp("feed.log")), 0);
+  ASSERT_EQ(runTool({kFeed, kData + "/intel.g2o", "--robots", "3", "--log", log, "--quiet"},
+                    tmp("feed.log")),
+            0);
   const auto batches = readLog(log);
   ASSERT_EQ(batches.size(), 1728u);
   std::map<std::string, int64_t> lastSeq;
@@ -60,8 +62,14 @@ TEST(LoopdFeed, LogHasOneBatchPerPoseNumberedPerSender) {
 
 TEST(LoopdFeed, DeterministicBatches) {
   const std::string a = tmp("a.lcmlog"), b = tmp("b.lcmlog");
-  ASSERT_EQ(runTool({kFeed, kData + "/w100.graph", "--robots", "2", "--interleave", "--log", a, "--quiet"}, tmp("f1.log")), 0);
-  ASSERT_EQ(runTool({kFeed, kData + "/w100.graph", "--robots", "2", "--interleave", "--log", b, "--quiet"}, tmp("f2.log")), 0);
+  ASSERT_EQ(runTool({kFeed, kData + "/w100.graph", "--robots", "2", "--interleave", "--log", a,
+                     "--quiet"},
+                    tmp("f1.log")),
+            0);
+  ASSERT_EQ(runTool({kFeed, kData + "/w100.graph", "--robots", "2", "--interleave", "--log", b,
+                     "--quiet"},
+                    tmp("f2.log")),
+            0);
   auto x = readLog(a), y = readLog(b);
   ASSERT_EQ(x.size(), y.size());
   for (size_t i = 0; i < x.size(); ++i) {
@@ -93,7 +101,8 @@ TEST(LoopdListen, WritesEstimateAndCovariancesThenExitsWhenQuiet) {
                              "--until-quiet", quietFor(1.5)},
                             tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  ASSERT_EQ(runTool({kFeed, kData + "/intel.g2o", "--poses", "200", "--rate", "400", "--lcm-url", url, "--quiet"},
+  ASSERT_EQ(runTool({kFeed, kData + "/intel.g2o", "--poses", "200", "--rate", "400", "--lcm-url",
+                     url, "--quiet"},
                     tmp("feed.log")),
             0);
   const auto t0 = std::chrono::steady_clock::now();
@@ -127,11 +136,13 @@ TEST(LoopdListen, UntilBatchesEndsOnTheServersConvergedStatus) {
                             tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   const std::string intel = kData + "/intel.g2o";
-  ASSERT_EQ(runTool({kFeed, intel, "--poses", "200", "--lcm-url", url, "--quiet"}, tmp("f1.log")), 0);
+  ASSERT_EQ(runTool({kFeed, intel, "--poses", "200", "--lcm-url", url, "--quiet"}, tmp("f1.log")),
+            0);
   std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int>(3000 * kSlowdown)));
   EXPECT_TRUE(listen.alive()) << "200 of 300 batches: it must still wait. " << listen.output();
   // The same 200 again (resends do not count) and 100 more.
-  ASSERT_EQ(runTool({kFeed, intel, "--poses", "300", "--lcm-url", url, "--quiet"}, tmp("f2.log")), 0);
+  ASSERT_EQ(runTool({kFeed, intel, "--poses", "300", "--lcm-url", url, "--quiet"}, tmp("f2.log")),
+            0);
   ASSERT_EQ(listen.wait(60 * kSlowdown), 0) << listen.output();
   srv.kill(SIGINT);
   EXPECT_EQ(srv.wait(20), 0);
@@ -145,8 +156,9 @@ TEST(LoopdListen, UntilBatchesEndsOnTheServersConvergedStatus) {
 // An intel with 15 ambiguous loop closures (wrong targets: one measurement, other keys).
 std::string ambiguousIntel() {
   const std::string graph = tmp("intel_amb.g2o");
-  EXPECT_EQ(runTool({kBin + "/tools/loopd-outliers", kData + "/intel.g2o", "--ambiguous", "15", "--null",
-                     "--decoys", "target", "--seed", "6", "--out", graph, "--truth", tmp("intel_amb.json")},
+  EXPECT_EQ(runTool({kBin + "/tools/loopd-outliers", kData + "/intel.g2o", "--ambiguous", "15",
+                     "--null", "--decoys", "target", "--seed", "6", "--out", graph, "--truth",
+                     tmp("intel_amb.json")},
                     tmp("amb.log")),
             0);
   return graph;
@@ -174,9 +186,10 @@ TEST(LoopdFeed, HypothesesGroupsBecomeAmbiguousFactors) {
 }
 
 TEST(LoopdFeed, AmbiguousIntelThroughTheServerMatchesLoopdSolve) {
-  const std::string graph = ambiguousIntel(), offline = tmp("amb_offline.g2o"), stats = tmp("amb_stats.json");
-  ASSERT_EQ(runTool({kSolve, graph, "--solver", "mh", "--incremental", "--quiet", "--out", offline, "--stats",
-                     stats},
+  const std::string graph = ambiguousIntel(), offline = tmp("amb_offline.g2o"),
+                    stats = tmp("amb_stats.json");
+  ASSERT_EQ(runTool({kSolve, graph, "--solver", "mh", "--incremental", "--quiet", "--out", offline,
+                     "--stats", stats},
                     tmp("solve.log")),
             0);
   const std::string url = uniqueUrl();
@@ -186,7 +199,8 @@ TEST(LoopdFeed, AmbiguousIntelThroughTheServerMatchesLoopdSolve) {
   Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", quietFor(3)},
                             tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  ASSERT_EQ(runTool({kFeed, graph, "--rate", "2000", "--lcm-url", url, "--quiet"}, tmp("feed.log")), 0);
+  ASSERT_EQ(runTool({kFeed, graph, "--rate", "2000", "--lcm-url", url, "--quiet"}, tmp("feed.log")),
+            0);
   ASSERT_EQ(listen.wait(60), 0) << listen.output();
   srv.kill(SIGINT);
   EXPECT_EQ(srv.wait(20), 0);

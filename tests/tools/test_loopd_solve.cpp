@@ -47,7 +47,7 @@ TEST(LoopdSolve, WritesStatsEstimateAndCovariances) {
   const std::string est = testing::TempDir() + "/est.g2o";
   const std::string cov = testing::TempDir() + "/cov.txt";
   const RunResult r = run(kData + "/tinyGrid3D.g2o --stats " + stats + " --out " + est +
-                    " --covariances " + cov + " --quiet");
+                          " --covariances " + cov + " --quiet");
   ASSERT_EQ(r.exitCode, 0) << r.output;
   EXPECT_TRUE(r.output.empty()) << "--quiet printed: " << r.output;
   const std::string json = slurp(stats);
@@ -68,8 +68,8 @@ TEST(LoopdSolve, IncrementalReportsUpdateTimes) {
   const RunResult r = run(kData + "/tinyGrid3D.g2o --incremental --stats " + stats + " --quiet");
   ASSERT_EQ(r.exitCode, 0) << r.output;
   const std::string json = slurp(stats);
-  for (const char* field : {"\"updates\": 9", "\"update_ms_mean\"", "\"update_ms_p99\"",
-                            "\"update_ms_max\""})
+  for (const char* field :
+       {"\"updates\": 9", "\"update_ms_mean\"", "\"update_ms_p99\"", "\"update_ms_max\""})
     EXPECT_NE(json.find(field), std::string::npos) << field << " missing in " << json;
 }
 

@@ -112,7 +112,8 @@ TEST(LoopdViewHttp, ServesThePageItsAssetsAndState) {
   EXPECT_NE(page.find("Content-Type: text/html"), std::string::npos);
   EXPECT_NE(page.find("<canvas id=\"map\""), std::string::npos);
   EXPECT_NE(page.find("Content-Security-Policy: default-src 'self'"), std::string::npos);
-  for (const char* p : {"/index.html", "/app.js", "/style.css", "/healthz", "/state.json", "/?plane=xz"})
+  for (const char* p :
+       {"/index.html", "/app.js", "/style.css", "/healthz", "/state.json", "/?plane=xz"})
     EXPECT_EQ(statusOf(get(port, p)), 200) << p;
   EXPECT_NE(get(port, "/app.js").find("text/javascript"), std::string::npos);
   // Nothing on the page comes from anywhere else (no CDN): no absolute URLs in the assets.
@@ -129,8 +130,12 @@ TEST(LoopdViewHttp, ServesThePageItsAssetsAndState) {
   EXPECT_EQ(statusOf(head), 200);
   EXPECT_EQ(head.find("<canvas"), std::string::npos);
   // Loopback names in Host are fine.
-  for (const char* host : {"localhost", "localhost:8080", "127.0.0.1:1234", "[::1]:80", "view.localhost"})
-    EXPECT_EQ(statusOf(raw(port, std::string("GET /healthz HTTP/1.1\r\nHost: ") + host + "\r\n\r\n")), 200) << host;
+  for (const char* host :
+       {"localhost", "localhost:8080", "127.0.0.1:1234", "[::1]:80", "view.localhost"})
+    EXPECT_EQ(
+        statusOf(raw(port, std::string("GET /healthz HTTP/1.1\r\nHost: ") + host + "\r\n\r\n")),
+        200)
+        << host;
   // HTTP/1.0 and a bare-LF client are served too.
   EXPECT_EQ(statusOf(raw(port, "GET /healthz HTTP/1.0\n\n")), 200);
   view.kill(SIGINT);
@@ -163,13 +168,18 @@ TEST(LoopdViewHttp, RejectsBadRequestsCleanlyAndKeepsServing) {
       {"method with bad chars", "G(T / HTTP/1.1\r\n\r\n", 400},
       {"header without colon", "GET / HTTP/1.1\r\nNoColonHere\r\n\r\n", 400},
       {"header name with space", "GET / HTTP/1.1\r\nBad Name: x\r\n\r\n", 400},
-      {"control character in header", "GET / HTTP/1.1\r\nX: a\x01" "b\r\n\r\n", 400},
+      {"control character in header",
+       "GET / HTTP/1.1\r\nX: a\x01"
+       "b\r\n\r\n",
+       400},
       {"NUL in target", nul, 400},
       {"binary", std::string("\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03\r\n\r\n", 15), 400},
-      {"oversized headers", "GET / HTTP/1.1\r\nX-Big: " + std::string(40000, 'a') + "\r\n\r\n", 431},
+      {"oversized headers", "GET / HTTP/1.1\r\nX-Big: " + std::string(40000, 'a') + "\r\n\r\n",
+       431},
       {"endless header, never terminated", "GET / HTTP/1.1\r\n" + std::string(100000, 'b'), 431},
       {"truncated request, then closed", "GET / HT", 400},
-      {"foreign Host (DNS rebinding)", "GET /state.json HTTP/1.1\r\nHost: evil.example:8080\r\n\r\n", 403},
+      {"foreign Host (DNS rebinding)",
+       "GET /state.json HTTP/1.1\r\nHost: evil.example:8080\r\n\r\n", 403},
       {"two Host headers", "GET / HTTP/1.1\r\nHost: localhost\r\nHost: evil.example\r\n\r\n", 400},
   };
   for (const auto& c : cases) {
@@ -239,7 +249,8 @@ TEST(LoopdViewHttp, SeveralEventStreamsGetTheNewestState) {
     tabs.push_back(fd);
   }
   ASSERT_TRUE(waitForServer(port)) << "no status from loopd";
-  ASSERT_EQ(runTool({kFeed, kData + "/intel.g2o", "--poses", "300", "--rate", "1000", "--lcm-url", url, "--quiet"},
+  ASSERT_EQ(runTool({kFeed, kData + "/intel.g2o", "--poses", "300", "--rate", "1000", "--lcm-url",
+                     url, "--quiet"},
                     tmp("feed.log")),
             0);
   // Every tab sees the 300 poses (the server's status, relayed) within a few seconds.
@@ -272,7 +283,8 @@ TEST(LoopdViewHttp, BadCommandLines) {
 
 std::string chromiumPath() {
   if (const char* e = std::getenv("LOOPD_CHROMIUM"); e && *e) return e;
-  for (const char* p : {"/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/lib/chromium/chromium"})
+  for (const char* p :
+       {"/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/lib/chromium/chromium"})
     if (::access(p, X_OK) == 0) return p;
   return "";
 }
@@ -329,10 +341,11 @@ class Browser {
     }
   }
   /// Sends a command; returns its answer (the whole JSON message) or "" on timeout.
-  std::string call(const std::string& method, const std::string& params = "{}", const std::string& session = "",
-                   double seconds = 20) {
+  std::string call(const std::string& method, const std::string& params = "{}",
+                   const std::string& session = "", double seconds = 20) {
     const int id = ++id_;
-    std::string msg = "{\"id\":" + std::to_string(id) + ",\"method\":\"" + method + "\",\"params\":" + params;
+    std::string msg =
+        "{\"id\":" + std::to_string(id) + ",\"method\":\"" + method + "\",\"params\":" + params;
     if (!session.empty()) msg += ",\"sessionId\":\"" + session + "\"";
     msg += "}";
     msg.push_back('\0');
@@ -364,8 +377,10 @@ class Browser {
     call("Browser.close", "{}", "", 5);
     for (int i = 0; i < 100 && pid_ > 0; ++i) {
       int st;
-      if (waitpid(pid_, &st, WNOHANG) == pid_) pid_ = -1;
-      else std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      if (waitpid(pid_, &st, WNOHANG) == pid_)
+        pid_ = -1;
+      else
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
   }
 
@@ -390,12 +405,18 @@ std::string base64Decode(const std::string& in) {
   int bits = -8;
   for (unsigned char c : in) {
     int d;
-    if (c >= 'A' && c <= 'Z') d = c - 'A';
-    else if (c >= 'a' && c <= 'z') d = c - 'a' + 26;
-    else if (c >= '0' && c <= '9') d = c - '0' + 52;
-    else if (c == '+') d = 62;
-    else if (c == '/') d = 63;
-    else continue;
+    if (c >= 'A' && c <= 'Z')
+      d = c - 'A';
+    else if (c >= 'a' && c <= 'z')
+      d = c - 'a' + 26;
+    else if (c >= '0' && c <= '9')
+      d = c - '0' + 52;
+    else if (c == '+')
+      d = 62;
+    else if (c == '/')
+      d = 63;
+    else
+      continue;
     val = ((val << 6) | static_cast<unsigned>(d)) & 0xFFFFFFu;
     bits += 6;
     if (bits >= 0) {
@@ -409,8 +430,10 @@ std::string base64Decode(const std::string& in) {
 /// "posesDrawn=1728 rejectedLinks=10 ..." → map.
 std::map<std::string, std::string> pageState(Browser& b, const std::string& session) {
   const std::string expr =
-      "['state','connection','posesDrawn','robotsDrawn','rejectedLinks','linksAccepted','linksUndecided',"
-      "'ellipsesDrawn','serverPoses','serverRejected','errorsSeen','framesDrawn','framesSkipped','plane','seq']"
+      "['state','connection','posesDrawn','robotsDrawn','rejectedLinks','linksAccepted','"
+      "linksUndecided',"
+      "'ellipsesDrawn','serverPoses','serverRejected','errorsSeen','framesDrawn','framesSkipped','"
+      "plane','seq']"
       ".map(k => k + '=' + document.body.dataset[k]).join(' ')";
   std::string params = "{\"expression\":\"" + expr + "\",\"returnByValue\":true}";
   const std::string r = b.call("Runtime.evaluate", params, session, 10);
@@ -441,8 +464,8 @@ TEST(LoopdViewBrowser, DrawsTheMapLiveWithRejectedClosuresInHeadlessChromium) {
          "run scripts/install-deps.sh, or apt-get install -y chromium";
   // intel with 10 wrong loop closures; the dcs server rejects them.
   const std::string g2o = tmp("intel_outliers.g2o");
-  ASSERT_EQ(runTool({kOutliers, kData + "/intel.g2o", "--count", "10", "--mode", "random", "--seed", "3", "--out",
-                     g2o, "--truth", tmp("truth.json")},
+  ASSERT_EQ(runTool({kOutliers, kData + "/intel.g2o", "--count", "10", "--mode", "random", "--seed",
+                     "3", "--out", g2o, "--truth", tmp("truth.json")},
                     tmp("outliers.log")),
             0);
   const std::string url = uniqueUrl();
@@ -456,10 +479,12 @@ TEST(LoopdViewBrowser, DrawsTheMapLiveWithRejectedClosuresInHeadlessChromium) {
   ASSERT_TRUE(b.start(chromium, tmp("chromium-profile"), tmp("chromium.log")));
   const std::string created = b.call("Target.createTarget", "{\"url\":\"" + page + "\"}");
   const std::string target = field(created, "targetId");
-  ASSERT_FALSE(target.empty()) << "chromium did not answer over --remote-debugging-pipe (" << created << "); its log:\n"
+  ASSERT_FALSE(target.empty()) << "chromium did not answer over --remote-debugging-pipe ("
+                               << created << "); its log:\n"
                                << std::ifstream(tmp("chromium.log")).rdbuf();
   const std::string session =
-      field(b.call("Target.attachToTarget", "{\"targetId\":\"" + target + "\",\"flatten\":true}"), "sessionId");
+      field(b.call("Target.attachToTarget", "{\"targetId\":\"" + target + "\",\"flatten\":true}"),
+            "sessionId");
   ASSERT_FALSE(session.empty());
   b.call("Emulation.setDeviceMetricsOverride",
          "{\"width\":1280,\"height\":820,\"deviceScaleFactor\":1,\"mobile\":false}", session);
@@ -474,7 +499,8 @@ TEST(LoopdViewBrowser, DrawsTheMapLiveWithRejectedClosuresInHeadlessChromium) {
   ASSERT_EQ(st["connection"], "ok") << "the page never connected to /events";
   ASSERT_TRUE(waitForServer(port)) << "no status from loopd";
 
-  Proc feed = Proc::start({kFeed, g2o, "--rate", "2000", "--lcm-url", url, "--quiet"}, tmp("feed.log"));
+  Proc feed =
+      Proc::start({kFeed, g2o, "--rate", "2000", "--lcm-url", url, "--quiet"}, tmp("feed.log"));
   // While the feed runs the page draws intermediate maps (fewer poses than fed).
   int feedRc = -2;
   auto feedFinished = [&] {
@@ -491,8 +517,9 @@ TEST(LoopdViewBrowser, DrawsTheMapLiveWithRejectedClosuresInHeadlessChromium) {
   while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(30)) {
     st = pageState(b, session);
     seen.insert(num(st, "posesDrawn"));
-    if (num(st, "posesDrawn") == 1728 && num(st, "serverPoses") == 1728 && num(st, "serverRejected") >= 1 &&
-        num(st, "rejectedLinks") == num(st, "serverRejected") && feedFinished()) {
+    if (num(st, "posesDrawn") == 1728 && num(st, "serverPoses") == 1728 &&
+        num(st, "serverRejected") >= 1 && num(st, "rejectedLinks") == num(st, "serverRejected") &&
+        feedFinished()) {
       // Let the server converge (idle 0.5 s), then read the final state.
       std::this_thread::sleep_for(std::chrono::milliseconds(1500));
       st = pageState(b, session);
@@ -508,7 +535,8 @@ TEST(LoopdViewBrowser, DrawsTheMapLiveWithRejectedClosuresInHeadlessChromium) {
   ASSERT_TRUE(done) << "page state: " << summary << "\nview log:\n" << view.output();
   EXPECT_EQ(num(st, "posesDrawn"), 1728) << summary;  // every fed pose is on the canvas
   EXPECT_EQ(num(st, "robotsDrawn"), 1);
-  EXPECT_GE(num(st, "rejectedLinks"), 5) << summary;  // the injected wrong closures, shown as rejected
+  EXPECT_GE(num(st, "rejectedLinks"), 5)
+      << summary;  // the injected wrong closures, shown as rejected
   EXPECT_EQ(num(st, "rejectedLinks"), num(st, "serverRejected")) << summary;
   EXPECT_GT(num(st, "linksAccepted"), 700) << summary;  // intel's loop closures
   EXPECT_EQ(num(st, "linksUndecided"), 0) << summary;
@@ -516,7 +544,8 @@ TEST(LoopdViewBrowser, DrawsTheMapLiveWithRejectedClosuresInHeadlessChromium) {
   EXPECT_EQ(num(st, "errorsSeen"), 0) << summary;
   EXPECT_GE(seen.size(), 2u) << "the page drew no intermediate state";
 
-  const std::string shot = field(b.call("Page.captureScreenshot", "{\"format\":\"png\"}", session, 30), "data");
+  const std::string shot =
+      field(b.call("Page.captureScreenshot", "{\"format\":\"png\"}", session, 30), "data");
   const std::string png = base64Decode(shot);
   ASSERT_GT(png.size(), 5000u);
   EXPECT_EQ(png.substr(1, 3), "PNG");

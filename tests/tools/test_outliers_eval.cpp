@@ -77,8 +77,9 @@ TEST(OutlierGenerator, ThreeDimensional) {
   for (int i : a.outliers) {
     const auto& e = a.graph.edges[i];
     EXPECT_EQ(e.type, io::EdgeType::BetweenSE3);
-    const double qn = std::sqrt(e.measurement[3] * e.measurement[3] + e.measurement[4] * e.measurement[4] +
-                                e.measurement[5] * e.measurement[5] + e.measurement[6] * e.measurement[6]);
+    const double qn =
+        std::sqrt(e.measurement[3] * e.measurement[3] + e.measurement[4] * e.measurement[4] +
+                  e.measurement[5] * e.measurement[5] + e.measurement[6] * e.measurement[6]);
     EXPECT_NEAR(qn, 1.0, 1e-12);
   }
 }
@@ -187,8 +188,9 @@ TEST(OutliersEvalBinaries, EndToEnd) {
   EXPECT_EQ(jsonIntArray(t, "outliers").size(), 7u);
   EXPECT_EQ(g.edges.size(), static_cast<size_t>(jsonNumber(t, "inlier_edges", 0)) + 7);
   const std::string eval = kBin + "/tools/loopd-eval --reference " + kDatasets +
-                           "/smallGrid3D.g2o --estimate " + kDatasets + "/smallGrid3D.g2o --truth " +
-                           truth + " --graph " + graph + " --json " + json + " > /dev/null";
+                           "/smallGrid3D.g2o --estimate " + kDatasets +
+                           "/smallGrid3D.g2o --truth " + truth + " --graph " + graph + " --json " +
+                           json + " > /dev/null";
   ASSERT_EQ(std::system(eval.c_str()), 0) << eval;
   const std::string e = readTextFile(json);
   EXPECT_NEAR(jsonNumber(e, "ate_rmse", -1), 0.0, 1e-9);
@@ -270,8 +272,8 @@ TEST(OutliersEvalBinaries, AmbiguousEndToEnd) {
                     stats = dir + "/intel_amb_stats.json", est = dir + "/intel_amb_est.g2o",
                     ref = dir + "/intel_ref.g2o", json = dir + "/intel_amb_eval.json";
   const std::string gen = kBin + "/tools/loopd-outliers " + kDatasets +
-                          "/intel.g2o --ambiguous 30 --null --decoys mixed --seed 4 --out " + graph +
-                          " --truth " + truth + " 2>/dev/null";
+                          "/intel.g2o --ambiguous 30 --null --decoys mixed --seed 4 --out " +
+                          graph + " --truth " + truth + " 2>/dev/null";
   ASSERT_EQ(std::system(gen.c_str()), 0) << gen;
   const std::string solveRef = kBin + "/tools/loopd-solve " + kDatasets +
                                "/intel.g2o --solver isam2 --incremental -q --out " + ref;
@@ -294,8 +296,8 @@ TEST(OutliersEvalBinaries, AmbiguousEndToEnd) {
   EXPECT_EQ(jsonNumber(e, "recall", 0), 1.0);
   EXPECT_LT(jsonNumber(e, "ate_rmse", 1), 1e-3);
 
-  const std::string plain = kBin + "/tools/loopd-solve " + graph +
-                            " --solver isam2 --incremental -q --stats " + stats;
+  const std::string plain =
+      kBin + "/tools/loopd-solve " + graph + " --solver isam2 --incremental -q --stats " + stats;
   ASSERT_EQ(std::system(plain.c_str()), 0) << plain;
   EXPECT_EQ(jsonIntArray(readTextFile(stats), "chosen").size(), 30u);
   const std::string badK = kBin + "/tools/loopd-solve " + graph + " --max-hypotheses 0 2>/dev/null";

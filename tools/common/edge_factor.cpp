@@ -13,11 +13,13 @@ loopd::factor_t edgeFactor(const io::Edge& e, int ra, int rb) {
   f.noise_kind = loopd::factor_t::NOISE_INFORMATION;
   f.noise = client::upperTriangle(info.data(), d);
   f.num_noise = static_cast<std::int16_t>(f.noise.size());
-  f.measurement.assign(e.measurement.begin(), e.measurement.begin() + io::edgeMeasurementSize(e.type));
+  f.measurement.assign(e.measurement.begin(),
+                       e.measurement.begin() + io::edgeMeasurementSize(e.type));
   f.num_measurement = static_cast<std::int16_t>(f.measurement.size());
   f.robust = "";
   if (io::isBetween(e.type)) {
-    f.type = e.type == io::EdgeType::BetweenSE2 ? loopd::factor_t::BETWEEN_SE2 : loopd::factor_t::BETWEEN_SE3;
+    f.type = e.type == io::EdgeType::BetweenSE2 ? loopd::factor_t::BETWEEN_SE2
+                                                : loopd::factor_t::BETWEEN_SE3;
     const bool consecutive = ra == rb && (e.to == e.from + 1 || e.from == e.to + 1);
     f.role = consecutive ? loopd::factor_t::ROLE_ODOMETRY : loopd::factor_t::ROLE_LOOP_CLOSURE;
     f.keys = {client::wireKey(KeyRef::pose(ra, e.from)), client::wireKey(KeyRef::pose(rb, e.to))};

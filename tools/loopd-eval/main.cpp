@@ -36,14 +36,22 @@ int main(int argc, char** argv) {
       if (a == "--help" || a == "-h") {
         std::cout << kUsage;
         return 0;
-      } else if (a == "--reference") reference = value();
-      else if (a == "--estimate") estimate = value();
-      else if (a == "--truth") truth = value();
-      else if (a == "--stats") stats = value();
-      else if (a == "--graph") graph = value();
-      else if (a == "--json") json = value();
-      else if (a == "--quiet" || a == "-q") quiet = true;
-      else throw std::invalid_argument("unknown argument " + a);
+      } else if (a == "--reference")
+        reference = value();
+      else if (a == "--estimate")
+        estimate = value();
+      else if (a == "--truth")
+        truth = value();
+      else if (a == "--stats")
+        stats = value();
+      else if (a == "--graph")
+        graph = value();
+      else if (a == "--json")
+        json = value();
+      else if (a == "--quiet" || a == "-q")
+        quiet = true;
+      else
+        throw std::invalid_argument("unknown argument " + a);
     }
     if (reference.empty() || estimate.empty())
       throw std::invalid_argument("--reference and --estimate are required");
@@ -56,11 +64,15 @@ int main(int argc, char** argv) {
     const io::Dataset est = tools::readVertices(estimate);
     const tools::TrajectoryErrors t = tools::trajectoryErrors(ref, est);
     tools::JsonObject out;
-    out.add("reference", reference).add("estimate", estimate).add("poses", t.poses)
-        .add("ate_rmse", t.ateRmse).add("ate_max", t.ateMax).add("rpe_trans", t.rpeTrans)
+    out.add("reference", reference)
+        .add("estimate", estimate)
+        .add("poses", t.poses)
+        .add("ate_rmse", t.ateRmse)
+        .add("ate_max", t.ateMax)
+        .add("rpe_trans", t.rpeTrans)
         .add("rpe_rot_deg", t.rpeRotDeg);
-    std::printf("poses %d  ATE rmse %.6g m (max %.6g)  RPE %.6g m / %.6g deg\n", t.poses,
-                t.ateRmse, t.ateMax, t.rpeTrans, t.rpeRotDeg);
+    std::printf("poses %d  ATE rmse %.6g m (max %.6g)  RPE %.6g m / %.6g deg\n", t.poses, t.ateRmse,
+                t.ateMax, t.rpeTrans, t.rpeRotDeg);
     std::vector<std::int64_t> outliers;
     if (!truth.empty()) outliers = tools::jsonIntArray(tools::readTextFile(truth), "outliers");
     if (!truth.empty() && !stats.empty()) {
@@ -71,8 +83,10 @@ int main(int argc, char** argv) {
                   s.falseNegatives, s.precision, s.recall);
       out.add("outliers", static_cast<std::int64_t>(outliers.size()))
           .add("rejected", static_cast<std::int64_t>(rejected.size()))
-          .add("true_positives", s.truePositives).add("false_positives", s.falsePositives)
-          .add("false_negatives", s.falseNegatives).add("precision", s.precision)
+          .add("true_positives", s.truePositives)
+          .add("false_positives", s.falsePositives)
+          .add("false_negatives", s.falseNegatives)
+          .add("precision", s.precision)
           .add("recall", s.recall);
       // Ambiguous measurements (loopd-outliers --ambiguous): the choice against the truth.
       const std::string truthText = tools::readTextFile(truth);

@@ -122,7 +122,8 @@ double inlierChi2(const io::Dataset& graph, const io::Dataset& estimate,
   double chi2 = 0.0;
   for (const auto& f : p.graph.factors()) {
     const auto id = static_cast<std::int64_t>(f->id());
-    if (id < static_cast<std::int64_t>(g.edges.size()) && !skip.count(id)) chi2 += f->chi2(p.initial);
+    if (id < static_cast<std::int64_t>(g.edges.size()) && !skip.count(id))
+      chi2 += f->chi2(p.initial);
   }
   return chi2;
 }
@@ -180,17 +181,24 @@ io::Dataset readVertices(const std::string& path) {
     if (!(ls >> tag)) continue;
     io::Vertex v;
     int n = 0;
-    if (tag == "VERTEX_SE2") v.type = io::VertexType::SE2, n = 3;
-    else if (tag == "VERTEX_SE3:QUAT") v.type = io::VertexType::SE3, n = 7;
-    else if (tag == "VERTEX_XY") v.type = io::VertexType::Point2, n = 2;
-    else if (tag == "VERTEX_TRACKXYZ") v.type = io::VertexType::Point3, n = 3;
-    else continue;
+    if (tag == "VERTEX_SE2")
+      v.type = io::VertexType::SE2, n = 3;
+    else if (tag == "VERTEX_SE3:QUAT")
+      v.type = io::VertexType::SE3, n = 7;
+    else if (tag == "VERTEX_XY")
+      v.type = io::VertexType::Point2, n = 2;
+    else if (tag == "VERTEX_TRACKXYZ")
+      v.type = io::VertexType::Point3, n = 3;
+    else
+      continue;
     ls >> v.id;
     for (int k = 0; k < n; ++k) ls >> v.value[k];
     if (!ls) throw std::runtime_error(path + ":" + std::to_string(lineNo) + ": malformed " + tag);
     v.line = lineNo;
-    if (v.isLandmark()) d.landmarks.push_back(v);
-    else d.poses.push_back(v);
+    if (v.isLandmark())
+      d.landmarks.push_back(v);
+    else
+      d.poses.push_back(v);
     if (v.type == io::VertexType::SE3) d.is3d = true;
   }
   return d;

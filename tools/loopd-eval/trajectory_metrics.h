@@ -16,8 +16,8 @@
 namespace loopd::tools {
 
 struct TrajectoryErrors {
-  int poses = 0;           // matched poses
-  double ateRmse = 0.0;    // m
+  int poses = 0;         // matched poses
+  double ateRmse = 0.0;  // m
   double ateMax = 0.0;
   double rpeTrans = 0.0;   // mean, m
   double rpeRotDeg = 0.0;  // mean, degrees

@@ -46,7 +46,8 @@ struct Options {
 
 const char* kUsage =
     "usage: loopd-feed DATASET [--robots N] [--rate HZ] [--lcm-url URL] [--sender NAME]\n"
-    "                  [--log OUT.lcmlog] [--channel-prefix P] [--interleave] [--poses N] [--quiet]\n"
+    "                  [--log OUT.lcmlog] [--channel-prefix P] [--interleave] [--poses N] "
+    "[--quiet]\n"
     "  --robots N        split the poses into N consecutive segments, one robot each (default 1)\n"
     "  --rate HZ         poses per second (default 0 = as fast as possible)\n"
     "  --sender NAME     sender names are NAME0, NAME1, ... (default feed)\n"
@@ -62,18 +63,30 @@ Options parse(int argc, char** argv) {
     if (a == "--help" || a == "-h") {
       std::fputs(kUsage, stdout);
       std::exit(0);
-    } else if (a == "--robots") o.robots = std::stoi(val());
-    else if (a == "--rate") o.rate = std::stod(val());
-    else if (a == "--lcm-url") o.lcmUrl = val();
-    else if (a == "--sender") o.sender = val();
-    else if (a == "--log") o.log = val();
-    else if (a == "--channel-prefix") o.prefix = val();
-    else if (a == "--poses") o.poses = std::stol(val());
-    else if (a == "--interleave") o.interleave = true;
-    else if (a == "--quiet") o.quiet = true;
-    else if (a.rfind("--", 0) == 0) throw std::invalid_argument("unknown flag " + a);
-    else if (o.dataset.empty()) o.dataset = a;
-    else throw std::invalid_argument("unexpected argument " + a);
+    } else if (a == "--robots")
+      o.robots = std::stoi(val());
+    else if (a == "--rate")
+      o.rate = std::stod(val());
+    else if (a == "--lcm-url")
+      o.lcmUrl = val();
+    else if (a == "--sender")
+      o.sender = val();
+    else if (a == "--log")
+      o.log = val();
+    else if (a == "--channel-prefix")
+      o.prefix = val();
+    else if (a == "--poses")
+      o.poses = std::stol(val());
+    else if (a == "--interleave")
+      o.interleave = true;
+    else if (a == "--quiet")
+      o.quiet = true;
+    else if (a.rfind("--", 0) == 0)
+      throw std::invalid_argument("unknown flag " + a);
+    else if (o.dataset.empty())
+      o.dataset = a;
+    else
+      throw std::invalid_argument("unexpected argument " + a);
   }
   if (o.dataset.empty()) throw std::invalid_argument("no DATASET");
   if (o.robots < 1 || o.robots > 1000) throw std::invalid_argument("--robots must be 1..1000");
@@ -116,21 +129,26 @@ int run(const Options& o) {
       const long d = feed.dueAt(ds.edges[static_cast<size_t>(g.firstEdge + k)]);
       at = (d < 0 || at < 0) ? -1 : std::max(at, d);
     }
-    if (at < 0) skipped += static_cast<size_t>(g.count);
-    else dueGroups[static_cast<size_t>(at)].push_back(&g);
+    if (at < 0)
+      skipped += static_cast<size_t>(g.count);
+    else
+      dueGroups[static_cast<size_t>(at)].push_back(&g);
   }
   for (const auto& e : ds.edges) {
     if (inGroup[static_cast<size_t>(e.index)]) continue;
     const long at = feed.dueAt(e);
-    if (at < 0) ++skipped;
-    else due[static_cast<size_t>(at)].push_back(&e);
+    if (at < 0)
+      ++skipped;
+    else
+      due[static_cast<size_t>(at)].push_back(&e);
   }
 
   // Where batches go.
   std::unique_ptr<lcm::LCM> lcm;
   std::unique_ptr<lcm::LogFile> log;
   std::int64_t logTime = std::chrono::duration_cast<std::chrono::microseconds>(
-                             std::chrono::system_clock::now().time_since_epoch()).count();
+                             std::chrono::system_clock::now().time_since_epoch())
+                             .count();
   std::int64_t events = 0;
   client::BatchSink sink;
   if (!o.log.empty()) {
@@ -166,8 +184,10 @@ int run(const Options& o) {
     client::FactorPublisher& pub = *pubs[static_cast<size_t>(r)];
     if (!started[static_cast<size_t>(r)]) {
       started[static_cast<size_t>(r)] = true;
-      if (ds.is3d) pub.initialValue(KeyRef::pose(r, id), client::Pose3{});
-      else pub.initialValue(KeyRef::pose(r, id), client::Pose2{});
+      if (ds.is3d)
+        pub.initialValue(KeyRef::pose(r, id), client::Pose3{});
+      else
+        pub.initialValue(KeyRef::pose(r, id), client::Pose2{});
     }
     for (const io::Edge* e : due[i]) pub.factor(feed.factor(*e));
     for (const io::HypothesisGroup* g : dueGroups[i]) {
@@ -181,13 +201,15 @@ int run(const Options& o) {
           alternatives.back().role = loopd::factor_t::ROLE_LANDMARK;
       }
       // Group ids follow the edge indices: file order, never an edge's id.
-      const std::int64_t id = static_cast<std::int64_t>(ds.edges.size()) + (g - ds.hypotheses.data());
+      const std::int64_t id =
+          static_cast<std::int64_t>(ds.edges.size()) + (g - ds.hypotheses.data());
       pub.ambiguous(ambiguousMode(alternatives, g->line), alternatives, g->null, 0.0, id);
     }
     pub.flush();
     logTime += stepUs;
     if (lcm && o.rate > 0) {
-      const auto due = t0 + std::chrono::microseconds(static_cast<std::int64_t>((i + 1) * 1e6 / o.rate));
+      const auto due =
+          t0 + std::chrono::microseconds(static_cast<std::int64_t>((i + 1) * 1e6 / o.rate));
       std::this_thread::sleep_until(due);
     }
     if (!o.quiet && (i + 1) % 1000 == 0)
@@ -196,13 +218,17 @@ int run(const Options& o) {
   std::int64_t batches = 0;
   for (auto& p : pubs) batches += p->batchesPublished();
   if (!o.quiet)
-    std::fprintf(stderr, "loopd-feed: %zu poses, %zu robots, %lld batches%s in %.2f s%s\n", n, robots,
-                 static_cast<long long>(batches), o.log.empty() ? " published" : (" logged to " + o.log).c_str(),
-                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
-                 skipped ? (", " + std::to_string(skipped) + " edges outside --poses skipped").c_str() : "");
+    std::fprintf(
+        stderr, "loopd-feed: %zu poses, %zu robots, %lld batches%s in %.2f s%s\n", n, robots,
+        static_cast<long long>(batches),
+        o.log.empty() ? " published" : (" logged to " + o.log).c_str(),
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+        skipped ? (", " + std::to_string(skipped) + " edges outside --poses skipped").c_str() : "");
   return 0;
 }
 
 }  // namespace
 
-int main(int argc, char** argv) { return tools::parseAndRun("loopd-feed", kUsage, argc, argv, parse, run); }
+int main(int argc, char** argv) {
+  return tools::parseAndRun("loopd-feed", kUsage, argc, argv, parse, run);
+}

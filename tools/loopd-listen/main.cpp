@@ -39,7 +39,8 @@ std::atomic<bool> g_stop{false};
 extern "C" void onSignal(int) { g_stop = true; }
 
 const char* kUsage =
-    "usage: loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o [--covariances COV.txt]\n"
+    "usage: loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o [--covariances "
+    "COV.txt]\n"
     "                    [--until-quiet SECONDS] [--until-batches N] [--quiet]\n";
 
 }  // namespace
@@ -56,18 +57,28 @@ int main(int argc, char** argv) {
       if (a == "--help" || a == "-h") {
         std::fputs(kUsage, stdout);
         return 0;
-      } else if (a == "--lcm-url") url = val();
-      else if (a == "--channel-prefix") prefix = val();
-      else if (a == "--out") out = val();
-      else if (a == "--covariances") cov = val();
-      else if (a == "--until-quiet") quietSeconds = std::stod(val());
-      else if (a == "--until-batches") untilBatches = std::stoll(val());
-      else if (a == "--quiet") quiet = true;
-      else throw std::invalid_argument("unknown argument " + a);
+      } else if (a == "--lcm-url")
+        url = val();
+      else if (a == "--channel-prefix")
+        prefix = val();
+      else if (a == "--out")
+        out = val();
+      else if (a == "--covariances")
+        cov = val();
+      else if (a == "--until-quiet")
+        quietSeconds = std::stod(val());
+      else if (a == "--until-batches")
+        untilBatches = std::stoll(val());
+      else if (a == "--quiet")
+        quiet = true;
+      else
+        throw std::invalid_argument("unknown argument " + a);
     }
     if (out.empty()) throw std::invalid_argument("--out is required");
-    if (!std::isfinite(quietSeconds)) throw std::invalid_argument("--until-quiet must be a finite number of seconds");
-    if (untilBatches == 0 || untilBatches < -1) throw std::invalid_argument("--until-batches must be positive");
+    if (!std::isfinite(quietSeconds))
+      throw std::invalid_argument("--until-quiet must be a finite number of seconds");
+    if (untilBatches == 0 || untilBatches < -1)
+      throw std::invalid_argument("--until-batches must be positive");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "loopd-listen: %s\n\n%s", e.what(), kUsage);
     return 2;
@@ -94,7 +105,8 @@ int main(int argc, char** argv) {
   sub.onStatus([&](const loopd::status_t& st) {
     // Duplicates do not count: a resend of a handled batch is not a new one.
     const long long handled = st.batches_accepted + st.batches_rejected + st.batches_expired;
-    if (untilBatches > 0 && handled >= untilBatches && st.converged && st.queue_depth == 0 && st.batches_held == 0)
+    if (untilBatches > 0 && handled >= untilBatches && st.converged && st.queue_depth == 0 &&
+        st.batches_held == 0)
       done = true;
   });
   sub.onCovariance([&](const loopd::covariance_t& m) {
@@ -105,7 +117,8 @@ int main(int argc, char** argv) {
       std::vector<double> up;
       for (int r = 0; r < d; ++r)
         for (int c = r; c < d; ++c) up.push_back(m.values[off + static_cast<size_t>(r * d + c)]);
-      if (m.keys[static_cast<size_t>(i)].kind == loopd::key_t::POSE) poseCov[m.keys[static_cast<size_t>(i)].index] = up;
+      if (m.keys[static_cast<size_t>(i)].kind == loopd::key_t::POSE)
+        poseCov[m.keys[static_cast<size_t>(i)].index] = up;
       off += static_cast<size_t>(d * d);
     }
   });
@@ -119,7 +132,9 @@ int main(int argc, char** argv) {
   lcm.publish(prefix + "COMMAND", &req);
 
   bool finalRequested = false;
-  auto quietFor = [&] { return std::chrono::duration<double>(Clock::now() - lastEstimate).count(); };
+  auto quietFor = [&] {
+    return std::chrono::duration<double>(Clock::now() - lastEstimate).count();
+  };
   while (!g_stop) {
     lcm.handleTimeout(100);
     if (finalRequested) {
@@ -153,7 +168,8 @@ int main(int argc, char** argv) {
       ds.landmarks.push_back(v);
     }
   }
-  std::sort(ds.poses.begin(), ds.poses.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
+  std::sort(ds.poses.begin(), ds.poses.end(),
+            [](const auto& a, const auto& b) { return a.id < b.id; });
   try {
     io::writeG2oVertices(out, ds);
   } catch (const std::exception& e) {
@@ -166,8 +182,10 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "loopd-listen: cannot write %s\n", cov.c_str());
       return 1;
     }
-    std::fprintf(f, "# loopd marginal covariances (latest-pose covariances as published): KIND id, then the "
-                    "upper triangle (row-major) in tangent order\n");
+    std::fprintf(
+        f,
+        "# loopd marginal covariances (latest-pose covariances as published): KIND id, then the "
+        "upper triangle (row-major) in tangent order\n");
     for (const auto& [id, up] : poseCov) {
       std::fprintf(f, "POSE %lld", static_cast<long long>(id));
       for (double c : up) std::fprintf(f, " %.17g", c);
@@ -179,12 +197,16 @@ int main(int argc, char** argv) {
     const auto st = sub.lastStatus();
     int common = 0;
     for (const auto& [r, t] : sub.all()) common += t.commonFrame ? 1 : 0;
-    std::fprintf(stderr, "loopd-listen: %zu poses, %zu landmarks written to %s (%lld estimate messages, %zu robots, "
-                         "%d in a common frame; server %s%s, chi2 %.12g, %lld batches accepted, %lld duplicate, "
-                         "%lld rejected)\n",
-                 ds.poses.size(), ds.landmarks.size(), out.c_str(), static_cast<long long>(sub.estimatesReceived()),
-                 sub.all().size(), common, st.solver.c_str(), st.converged ? " converged" : "", st.chi2, static_cast<long long>(st.batches_accepted),
-                 static_cast<long long>(st.batches_duplicate), static_cast<long long>(st.batches_rejected));
+    std::fprintf(
+        stderr,
+        "loopd-listen: %zu poses, %zu landmarks written to %s (%lld estimate messages, %zu robots, "
+        "%d in a common frame; server %s%s, chi2 %.12g, %lld batches accepted, %lld duplicate, "
+        "%lld rejected)\n",
+        ds.poses.size(), ds.landmarks.size(), out.c_str(),
+        static_cast<long long>(sub.estimatesReceived()), sub.all().size(), common,
+        st.solver.c_str(), st.converged ? " converged" : "", st.chi2,
+        static_cast<long long>(st.batches_accepted), static_cast<long long>(st.batches_duplicate),
+        static_cast<long long>(st.batches_rejected));
   }
   return 0;
 }

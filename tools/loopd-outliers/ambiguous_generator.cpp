@@ -20,8 +20,8 @@ bool isSighting(const io::Edge& e) { return !isBetween(e); }
 
 /// Everything a decoy needs to know about the dataset.
 struct Context {
-  std::vector<std::int64_t> poseIds;                   // sorted
-  std::unordered_map<std::int64_t, std::int64_t> rank;  // pose id → index in poseIds
+  std::vector<std::int64_t> poseIds;                         // sorted
+  std::unordered_map<std::int64_t, std::int64_t> rank;       // pose id → index in poseIds
   std::unordered_map<std::int64_t, std::int64_t> firstSeen;  // landmark → earliest pose rank
   std::unordered_map<std::int64_t, Eigen::Vector3d> landmarkAt;
   std::unordered_map<std::int64_t, Eigen::Vector4d> poseAt;  // x y z heading (file estimate)
@@ -44,7 +44,8 @@ Context makeContext(const io::Dataset& in) {
                                      v.type == io::VertexType::SE3 ? v.value[2] : 0.0, heading);
   }
   for (const auto& v : in.landmarks)
-    c.landmarkAt[v.id] = Eigen::Vector3d(v.value[0], v.value[1], v.type == io::VertexType::Point3 ? v.value[2] : 0.0);
+    c.landmarkAt[v.id] = Eigen::Vector3d(v.value[0], v.value[1],
+                                         v.type == io::VertexType::Point3 ? v.value[2] : 0.0);
   std::vector<double> lengths;
   for (const auto& e : in.edges) {
     if (isLoop(e)) lengths.push_back(translationNorm(e));
@@ -198,10 +199,14 @@ bool targetDecoy(const io::Edge& truth, const Context& c, int window,
 
 const char* decoyModeName(DecoyMode m) {
   switch (m) {
-    case DecoyMode::Target: return "target";
-    case DecoyMode::Measurement: return "measurement";
-    case DecoyMode::Mixed: return "mixed";
-    case DecoyMode::Aliased: return "aliased";
+    case DecoyMode::Target:
+      return "target";
+    case DecoyMode::Measurement:
+      return "measurement";
+    case DecoyMode::Mixed:
+      return "mixed";
+    case DecoyMode::Aliased:
+      return "aliased";
   }
   return "?";
 }
@@ -211,7 +216,8 @@ DecoyMode decoyModeFromName(const std::string& n) {
   if (n == "measurement") return DecoyMode::Measurement;
   if (n == "mixed") return DecoyMode::Mixed;
   if (n == "aliased") return DecoyMode::Aliased;
-  throw std::invalid_argument("--decoys takes target, measurement, mixed or aliased, got '" + n + "'");
+  throw std::invalid_argument("--decoys takes target, measurement, mixed or aliased, got '" + n +
+                              "'");
 }
 
 AmbiguousResult makeAmbiguous(const io::Dataset& input, const AmbiguousOptions& opt) {
@@ -231,7 +237,8 @@ AmbiguousResult makeAmbiguous(const io::Dataset& input, const AmbiguousOptions& 
   Rng rng(opt.seed);
   // N distinct edges, uniformly (partial Fisher–Yates).
   for (int i = 0; i < opt.count; ++i)
-    std::swap(candidates[i], candidates[rng.integer(i, static_cast<std::int64_t>(candidates.size()) - 1)]);
+    std::swap(candidates[i],
+              candidates[rng.integer(i, static_cast<std::int64_t>(candidates.size()) - 1)]);
   std::vector<char> chosen(input.edges.size(), 0);
   for (int i = 0; i < opt.count; ++i) chosen[candidates[i]] = 1;
 
@@ -254,8 +261,8 @@ AmbiguousResult makeAmbiguous(const io::Dataset& input, const AmbiguousOptions& 
     g.null = opt.null;
     g.line = e.line;
     const int truePosition = static_cast<int>(rng.integer(0, opt.alternatives - 1));
-    std::unordered_set<std::int64_t> used = {isSighting(e) ? e.to
-                                                           : (c.rank.at(e.from) < c.rank.at(e.to) ? e.from : e.to)};
+    std::unordered_set<std::int64_t> used = {
+        isSighting(e) ? e.to : (c.rank.at(e.from) < c.rank.at(e.to) ? e.from : e.to)};
     for (int a = 0; a < opt.alternatives; ++a) {
       if (a == truePosition) {
         out.trueEdges.push_back(push(e));
@@ -278,7 +285,9 @@ AmbiguousResult makeAmbiguous(const io::Dataset& input, const AmbiguousOptions& 
 
 std::string ambiguousTruthJson(const std::string& inputPath, const AmbiguousOptions& opt,
                                const AmbiguousResult& r) {
-  auto ints = [](const std::vector<int>& v) { return std::vector<std::int64_t>(v.begin(), v.end()); };
+  auto ints = [](const std::vector<int>& v) {
+    return std::vector<std::int64_t>(v.begin(), v.end());
+  };
   JsonObject o;
   o.add("input", inputPath)
       .add("mode", "ambiguous")

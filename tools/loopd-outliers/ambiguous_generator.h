@@ -28,12 +28,12 @@ namespace loopd::tools {
 enum class DecoyMode { Target, Measurement, Mixed, Aliased };
 
 struct AmbiguousOptions {
-  int count = 50;         // N
-  int alternatives = 3;   // k ≥ 2 (the true one included)
-  bool null = false;      // add a null hypothesis to every group
+  int count = 50;        // N
+  int alternatives = 3;  // k ≥ 2 (the true one included)
+  bool null = false;     // add a null hypothesis to every group
   DecoyMode decoys = DecoyMode::Target;
-  int window = 10;        // target decoys: offset at most this many poses
-  bool landmarks = false; // pick landmark re-sightings instead of loop closures
+  int window = 10;         // target decoys: offset at most this many poses
+  bool landmarks = false;  // pick landmark re-sightings instead of loop closures
   std::uint64_t seed = 1;
 };
 

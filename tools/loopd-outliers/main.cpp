@@ -39,7 +39,8 @@ const char* kUsage =
     "sighting, a nearby landmark already seen), or a wrong measurement (translation moved by\n"
     "0.5-2 x the median loop length, rotation by 10-45 degrees); 'aliased': a wrong\n"
     "measurement only 2-4 of the edge's own standard deviations away (whitened), which the\n"
-    "data may take long to tell apart -- the stress case for --max-hypotheses. TRUTH.json: {input, mode:\n"
+    "data may take long to tell apart -- the stress case for --max-hypotheses. TRUTH.json: {input, "
+    "mode:\n"
     "ambiguous, count, alternatives, null, decoys, seed, outliers: [decoy edge indices],\n"
     "true_choice: [per group], true_edges: [per group]}.\n";
 
@@ -135,7 +136,8 @@ int main(int argc, char** argv) {
       const tools::AmbiguousResult r = tools::makeAmbiguous(dataset, amb);
       io::writeG2oGraph(out, r.graph);
       writeTruth(truth, tools::ambiguousTruthJson(input, amb, r));
-      std::fprintf(stderr, "%s: %d loop closures made ambiguous (%d alternatives%s, %s decoys) -> %s\n",
+      std::fprintf(stderr,
+                   "%s: %d loop closures made ambiguous (%d alternatives%s, %s decoys) -> %s\n",
                    input.c_str(), amb.count, amb.alternatives, amb.null ? " + null" : "",
                    tools::decoyModeName(amb.decoys), out.c_str());
       return 0;
@@ -144,7 +146,8 @@ int main(int argc, char** argv) {
     io::writeG2oGraph(out, r.graph);
     writeTruth(truth, tools::outlierTruthJson(input, opt, r));
     std::fprintf(stderr, "%s: %d edges + %d %s outliers -> %s\n", input.c_str(), r.inlierEdges,
-                 static_cast<int>(r.outliers.size()), tools::outlierModeName(opt.mode), out.c_str());
+                 static_cast<int>(r.outliers.size()), tools::outlierModeName(opt.mode),
+                 out.c_str());
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "loopd-outliers: %s\n", e.what());

@@ -13,9 +13,12 @@ namespace loopd::tools {
 
 const char* outlierModeName(OutlierMode m) {
   switch (m) {
-    case OutlierMode::Random: return "random";
-    case OutlierMode::Local: return "local";
-    case OutlierMode::Group: return "group";
+    case OutlierMode::Random:
+      return "random";
+    case OutlierMode::Local:
+      return "local";
+    case OutlierMode::Group:
+      return "group";
   }
   return "?";
 }
@@ -124,8 +127,8 @@ OutlierResult addOutliers(const io::Dataset& input, const OutlierOptions& opt) {
   int made = 0;
   while (made < opt.count) {
     std::int64_t a, b;
-    const bool local = opt.mode == OutlierMode::Local ||
-                       (opt.mode == OutlierMode::Group && opt.localGroups);
+    const bool local =
+        opt.mode == OutlierMode::Local || (opt.mode == OutlierMode::Group && opt.localGroups);
     if (local) {
       a = rng.integer(0, n - 3 - span);
       b = a + rng.integer(2, opt.localWindow);

@@ -20,9 +20,10 @@ void writeCovariances(const std::string& path, Backend& backend, const io::Datas
 
   std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);
   if (!f) throw std::runtime_error("cannot write " + path);
-  std::fprintf(f.get(),
-               "# loopd marginal covariances: KIND id, then the upper triangle (row-major) in "
-               "tangent order (SE2: x y theta; SE3: x y z rx ry rz, body frame; points: x y [z])\n");
+  std::fprintf(
+      f.get(),
+      "# loopd marginal covariances: KIND id, then the upper triangle (row-major) in "
+      "tangent order (SE2: x y theta; SE3: x y z rx ry rz, body frame; points: x y [z])\n");
   for (size_t i = 0; i < keys.size(); ++i) {
     std::fprintf(f.get(), "%s %lld", vertices[i]->isLandmark() ? "LANDMARK" : "POSE",
                  static_cast<long long>(vertices[i]->id));

@@ -68,8 +68,8 @@ int run(const tools::SolveOptions& opt) {
   const double finalChi2 = backend->chi2();
   if (!opt.quiet)
     std::fprintf(stderr, "%s: final chi2 %.9g after %d iterations (%s), solve %.3f s\n",
-                 backend->name().c_str(), finalChi2, summary.iterations,
-                 summary.stopReason.c_str(), solveSeconds);
+                 backend->name().c_str(), finalChi2, summary.iterations, summary.stopReason.c_str(),
+                 solveSeconds);
 
   // A diverged solve (NaN or infinite values) is an error, and its estimate is not written:
   // downstream readers would take it for poses.

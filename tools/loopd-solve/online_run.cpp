@@ -58,12 +58,12 @@ OnlineRunStats runOnline(Backend& backend, const PoseGraphProblem& problem, bool
                                keyToString(steps[i].pose) + " from earlier ones");
     const auto t0 = std::chrono::steady_clock::now();
     backend.update(u);
-    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                     .count());
+    ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     (carriesLoopClosure(u) ? closureMs : explorationMs).push_back(ms.back());
     if (!quiet && (i + 1) % 1000 == 0)
-      std::fprintf(stderr, "  update %zu/%zu  last %.2f ms  elapsed %.1f s\n", i + 1,
-                   steps.size(), ms.back(),
+      std::fprintf(stderr, "  update %zu/%zu  last %.2f ms  elapsed %.1f s\n", i + 1, steps.size(),
+                   ms.back(),
                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }
   backend.optimize();

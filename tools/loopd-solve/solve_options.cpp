@@ -30,8 +30,8 @@ std::string solveUsage() {
       "with \"diverged\": true).\n"
       "\nsolvers:\n";
   for (const auto& b : availableBackends())
-    s += "  " + b.name + std::string(10 - std::min<size_t>(9, b.name.size()), ' ') +
-         b.description + "\n";
+    s += "  " + b.name + std::string(10 - std::min<size_t>(9, b.name.size()), ' ') + b.description +
+         "\n";
   return s;
 }
 
@@ -81,7 +81,8 @@ SolveOptions parseSolveOptions(int argc, char** argv) {
       char* end = nullptr;
       const long n = std::strtol(v.c_str(), &end, 10);
       if (v.empty() || *end != '\0' || n < 1 || n > 1000)
-        throw std::invalid_argument("--max-hypotheses takes an integer in 1..1000, got '" + v + "'");
+        throw std::invalid_argument("--max-hypotheses takes an integer in 1..1000, got '" + v +
+                                    "'");
       o.maxHypotheses = static_cast<int>(n);
     } else if (a == "--quiet" || a == "-q") {
       o.quiet = true;

@@ -13,9 +13,10 @@ struct SolveOptions {
   std::string covariances;  // --covariances COV.txt
   int maxIterations = 100;
   bool quiet = false;
-  bool linearInit = true;   // --init linear|file
+  bool linearInit = true;  // --init linear|file
   double robustParameter = 0.0;
-  int maxHypotheses = 10;        // --max-hypotheses K (mh)  // --robust-parameter X (BackendOptions::robustParameter; 0 = default)
+  int maxHypotheses = 10;  // --max-hypotheses K (mh)  // --robust-parameter X
+                           // (BackendOptions::robustParameter; 0 = default)
 };
 
 /// Parses argv; on --help prints usage and exits 0; on a bad command line throws

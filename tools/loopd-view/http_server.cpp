@@ -38,10 +38,11 @@ std::pair<std::uint64_t, std::shared_ptr<const std::string>> SnapshotBoard::late
   return {version_, json_};
 }
 
-std::pair<std::uint64_t, std::shared_ptr<const std::string>> SnapshotBoard::waitNewer(std::uint64_t seen,
-                                                                                      int timeoutMs) const {
+std::pair<std::uint64_t, std::shared_ptr<const std::string>> SnapshotBoard::waitNewer(
+    std::uint64_t seen, int timeoutMs) const {
   std::unique_lock<std::mutex> l(mu_);
-  cv_.wait_for(l, std::chrono::milliseconds(timeoutMs), [&] { return version_ > seen || stopped_; });
+  cv_.wait_for(l, std::chrono::milliseconds(timeoutMs),
+               [&] { return version_ > seen || stopped_; });
   return {version_, json_};
 }
 
@@ -81,16 +82,26 @@ bool sendAll(int fd, const std::string& s) { return sendAll(fd, s.data(), s.size
 
 const char* reasonPhrase(int code) {
   switch (code) {
-    case 200: return "OK";
-    case 400: return "Bad Request";
-    case 403: return "Forbidden";
-    case 404: return "Not Found";
-    case 405: return "Method Not Allowed";
-    case 408: return "Request Timeout";
-    case 431: return "Request Header Fields Too Large";
-    case 503: return "Service Unavailable";
-    case 505: return "HTTP Version Not Supported";
-    default: return "Error";
+    case 200:
+      return "OK";
+    case 400:
+      return "Bad Request";
+    case 403:
+      return "Forbidden";
+    case 404:
+      return "Not Found";
+    case 405:
+      return "Method Not Allowed";
+    case 408:
+      return "Request Timeout";
+    case 431:
+      return "Request Header Fields Too Large";
+    case 503:
+      return "Service Unavailable";
+    case 505:
+      return "HTTP Version Not Supported";
+    default:
+      return "Error";
   }
 }
 
@@ -98,13 +109,15 @@ const char* reasonPhrase(int code) {
 const char* kCommonHeaders =
     "Cache-Control: no-store\r\n"
     "X-Content-Type-Options: nosniff\r\n"
-    "Content-Security-Policy: default-src 'self'; img-src 'self' data:; base-uri 'none'; form-action 'none'\r\n"
+    "Content-Security-Policy: default-src 'self'; img-src 'self' data:; base-uri 'none'; "
+    "form-action 'none'\r\n"
     "Connection: close\r\n";
 
-bool respond(int fd, int code, const std::string& type, const char* body, std::size_t size, bool head,
-             const std::string& extra = "") {
-  std::string h = "HTTP/1.1 " + std::to_string(code) + " " + reasonPhrase(code) + "\r\n" + "Content-Type: " + type +
-                  "\r\n" + "Content-Length: " + std::to_string(size) + "\r\n" + kCommonHeaders + extra + "\r\n";
+bool respond(int fd, int code, const std::string& type, const char* body, std::size_t size,
+             bool head, const std::string& extra = "") {
+  std::string h = "HTTP/1.1 " + std::to_string(code) + " " + reasonPhrase(code) + "\r\n" +
+                  "Content-Type: " + type + "\r\n" + "Content-Length: " + std::to_string(size) +
+                  "\r\n" + kCommonHeaders + extra + "\r\n";
   if (!head) h.append(body, size);
   return sendAll(fd, h);
 }
@@ -179,8 +192,9 @@ int parseHead(const std::string& head, Request& r) {
     if (static_cast<unsigned char>(c) <= 0x20 || static_cast<unsigned char>(c) >= 0x7f) return 400;
   const std::string_view v = parts[2];
   if (v != "HTTP/1.1" && v != "HTTP/1.0") {
-    const bool looksHttp = v.size() == 8 && v.substr(0, 5) == "HTTP/" && std::isdigit(static_cast<unsigned char>(v[5])) &&
-                           v[6] == '.' && std::isdigit(static_cast<unsigned char>(v[7]));
+    const bool looksHttp = v.size() == 8 && v.substr(0, 5) == "HTTP/" &&
+                           std::isdigit(static_cast<unsigned char>(v[5])) && v[6] == '.' &&
+                           std::isdigit(static_cast<unsigned char>(v[7]));
     return looksHttp ? 505 : 400;
   }
   for (std::size_t i = 1; i < lines.size(); ++i) {
@@ -260,7 +274,8 @@ void HttpServer::start() {
     listenFd_ = -1;
     throw std::runtime_error("cannot bind " + o_.bind + ":" + std::to_string(o_.port) + ": " + err);
   }
-  if (::listen(listenFd_, 128) != 0) throw std::runtime_error(std::string("listen: ") + std::strerror(errno));
+  if (::listen(listenFd_, 128) != 0)
+    throw std::runtime_error(std::string("listen: ") + std::strerror(errno));
   socklen_t len = sizeof addr;
   getsockname(listenFd_, reinterpret_cast<sockaddr*>(&addr), &len);
   port_ = ntohs(addr.sin_port);
@@ -295,7 +310,8 @@ void HttpServer::acceptLoop() {
     if (n <= 0 || !(fds[0].revents & POLLIN)) continue;
     const int fd = ::accept4(listenFd_, nullptr, nullptr, SOCK_CLOEXEC);
     if (fd < 0) {
-      if (errno == EMFILE || errno == ENFILE) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      if (errno == EMFILE || errno == ENFILE)
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
       continue;
     }
     ++stats_.connections;
@@ -349,7 +365,8 @@ void HttpServer::serve(int fd) {
       lingerDrain(fd);
       return;
     }
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
     if (left <= 0 || stopping_) {
       ++stats_.bad;
       if (!buf.empty()) {
@@ -429,8 +446,8 @@ void HttpServer::serve(int fd) {
 }
 
 void HttpServer::serveEvents(int fd, bool head) {
-  const std::string h = std::string("HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\n") + kCommonHeaders +
-                        "X-Accel-Buffering: no\r\n\r\n";
+  const std::string h = std::string("HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\n") +
+                        kCommonHeaders + "X-Accel-Buffering: no\r\n\r\n";
   if (!sendAll(fd, h) || head) return;
   if (!sendAll(fd, std::string("retry: 1000\n\n"))) return;
   ++stats_.sseClients;

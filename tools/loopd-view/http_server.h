@@ -28,7 +28,8 @@ class SnapshotBoard {
   /// The newest snapshot and its version (0 = none yet).
   std::pair<std::uint64_t, std::shared_ptr<const std::string>> latest() const;
   /// Waits until a version newer than `seen` exists, `timeoutMs` passes or stop() is called.
-  std::pair<std::uint64_t, std::shared_ptr<const std::string>> waitNewer(std::uint64_t seen, int timeoutMs) const;
+  std::pair<std::uint64_t, std::shared_ptr<const std::string>> waitNewer(std::uint64_t seen,
+                                                                         int timeoutMs) const;
   void stop();
   bool stopped() const;
 
@@ -42,11 +43,11 @@ class SnapshotBoard {
 
 struct HttpOptions {
   std::string bind = "127.0.0.1";
-  int port = 8080;             // 0 = any free port (see HttpServer::port())
-  int maxConnections = 64;     // beyond this: 503 and close
+  int port = 8080;          // 0 = any free port (see HttpServer::port())
+  int maxConnections = 64;  // beyond this: 503 and close
   int headerTimeoutMs = 10000;
   std::size_t maxHeaderBytes = 16384;
-  int keepaliveMs = 15000;     // SSE comment line when nothing new arrives
+  int keepaliveMs = 15000;  // SSE comment line when nothing new arrives
 };
 
 struct HttpStats {

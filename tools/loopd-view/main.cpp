@@ -7,8 +7,8 @@
 // endpoints of loop closures) and serves a page that updates live over server-sent events.
 // The state is coalesced here: at most --max-rate snapshots a second (fewer for very large
 // maps), each one the whole newest state; the page draws only the newest one it has.
-#include <lcm/lcm-cpp.hpp>
 #include <signal.h>
+#include <lcm/lcm-cpp.hpp>
 
 #include <algorithm>
 #include <atomic>
@@ -48,14 +48,16 @@ struct Options {
 const char* kUsage =
     "usage: loopd-view [--lcm-url URL] [--channel-prefix P] [--port 8080] [--bind 127.0.0.1]\n"
     "                  [--max-rate HZ] [--no-request]\n"
-    "  --lcm-url URL         LCM provider (default: LCM_DEFAULT_URL or udpm://239.255.76.67:7667?ttl=0)\n"
+    "  --lcm-url URL         LCM provider (default: LCM_DEFAULT_URL or "
+    "udpm://239.255.76.67:7667?ttl=0)\n"
     "  --channel-prefix P    the server's channel prefix (default LOOPD_)\n"
     "  --port N              HTTP port (default 8080; 0 = any free port, printed at start)\n"
     "  --bind ADDR           IPv4 address to listen on (default 127.0.0.1; the view has no\n"
     "                        authentication, so think twice before 0.0.0.0)\n"
     "  --max-rate HZ         at most this many snapshots a second to the page (default 10, 1..30)\n"
     "  --no-request          do not ask the server for a full estimate and decision list at start\n"
-    "Open the printed URL in a browser. Pages: / (the view), /state.json, /events (SSE), /healthz.\n";
+    "Open the printed URL in a browser. Pages: / (the view), /state.json, /events (SSE), "
+    "/healthz.\n";
 
 Options parse(int argc, char** argv) {
   Options o;
@@ -66,21 +68,30 @@ Options parse(int argc, char** argv) {
       char* end = nullptr;
       const long n = std::strtol(v.c_str(), &end, 10);
       if (v.empty() || *end || n < lo || n > hi)
-        throw std::invalid_argument(a + " takes an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+        throw std::invalid_argument(a + " takes an integer in [" + std::to_string(lo) + ", " +
+                                    std::to_string(hi) + "]");
       return static_cast<int>(n);
     };
     if (a == "--help" || a == "-h") {
       std::fputs(kUsage, stdout);
       std::exit(0);
-    } else if (a == "--lcm-url") o.lcmUrl = val();
-    else if (a == "--channel-prefix") o.prefix = val();
-    else if (a == "--port") o.port = integer(val(), 0, 65535);
-    else if (a == "--bind") o.bind = val();
-    else if (a == "--max-rate") o.maxRate = integer(val(), 1, 30);
-    else if (a == "--no-request") o.request = false;
-    else throw std::invalid_argument("unknown argument " + a);
+    } else if (a == "--lcm-url")
+      o.lcmUrl = val();
+    else if (a == "--channel-prefix")
+      o.prefix = val();
+    else if (a == "--port")
+      o.port = integer(val(), 0, 65535);
+    else if (a == "--bind")
+      o.bind = val();
+    else if (a == "--max-rate")
+      o.maxRate = integer(val(), 1, 30);
+    else if (a == "--no-request")
+      o.request = false;
+    else
+      throw std::invalid_argument("unknown argument " + a);
   }
-  if (o.prefix.empty() || o.prefix.size() > 53) throw std::invalid_argument("--channel-prefix: 1 to 53 characters");
+  if (o.prefix.empty() || o.prefix.size() > 53)
+    throw std::invalid_argument("--channel-prefix: 1 to 53 characters");
   return o;
 }
 
@@ -97,8 +108,9 @@ int run(const Options& o) {
   loopd::view::HttpServer http(ho, board);
   http.start();
   board.publish(state.renderJson(0));
-  std::printf("loopd-view: http://%s:%d/  (channels %s*, %s)\n", o.bind == "0.0.0.0" ? "127.0.0.1" : o.bind.c_str(),
-              http.port(), o.prefix.c_str(), url.c_str());
+  std::printf("loopd-view: http://%s:%d/  (channels %s*, %s)\n",
+              o.bind == "0.0.0.0" ? "127.0.0.1" : o.bind.c_str(), http.port(), o.prefix.c_str(),
+              url.c_str());
   std::fflush(stdout);
 
   std::thread lcmThread([&] {
@@ -116,7 +128,8 @@ int run(const Options& o) {
     if (o.request) {
       // Ask once the LCM thread is listening, and again when a server first shows up.
       const bool s = state.statusSeen();
-      if ((!requested && Clock::now() - start > std::chrono::milliseconds(300)) || (s && !statusSeen)) {
+      if ((!requested && Clock::now() - start > std::chrono::milliseconds(300)) ||
+          (s && !statusSeen)) {
         state.requestEverything();
         requested = true;
       }
@@ -132,7 +145,8 @@ int run(const Options& o) {
     board.publish(std::move(json));
   }
   std::fprintf(stderr, "loopd-view: stopping (%lld requests, %lld bad, %lld events sent)\n",
-               static_cast<long long>(http.stats().requests.load()), static_cast<long long>(http.stats().bad.load()),
+               static_cast<long long>(http.stats().requests.load()),
+               static_cast<long long>(http.stats().bad.load()),
                static_cast<long long>(http.stats().sseEvents.load()));
   board.stop();
   http.stop();

@@ -17,7 +17,8 @@ namespace loopd::view {
 namespace {
 
 std::int64_t nowUs() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::microseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -59,11 +60,21 @@ void str(std::string& o, const std::string& s) {
   o += '"';
   for (unsigned char c : s) {
     switch (c) {
-      case '"': o += "\\\""; break;
-      case '\\': o += "\\\\"; break;
-      case '\n': o += "\\n"; break;
-      case '\r': o += "\\r"; break;
-      case '\t': o += "\\t"; break;
+      case '"':
+        o += "\\\"";
+        break;
+      case '\\':
+        o += "\\\\";
+        break;
+      case '\n':
+        o += "\\n";
+        break;
+      case '\r':
+        o += "\\r";
+        break;
+      case '\t':
+        o += "\\t";
+        break;
       default:
         if (c < 0x20 || c == 0x7f) {
           char b[8];
@@ -80,12 +91,23 @@ void str(std::string& o, const std::string& s) {
 }  // namespace
 
 const char* errorCodeName(int code) {
-  static const char* const names[] = {"INVALID",          "DECODE_FAILED",         "WRONG_FINGERPRINT",
-                                      "NON_FINITE",       "NOT_POSITIVE_DEFINITE", "WRONG_DIMENSION",
-                                      "WRONG_KEY_KIND",   "UNKNOWN_KEY",           "UNKNOWN_FACTOR_ID",
-                                      "DUPLICATE_FACTOR_ID", "HELD_EXPIRED",       "COMMAND_FAILED",
-                                      "INTERNAL",         "INVALID_FIELD",         "LIMIT_EXCEEDED"};
-  return code >= 0 && code < static_cast<int>(sizeof names / sizeof *names) ? names[code] : "UNKNOWN";
+  static const char* const names[] = {"INVALID",
+                                      "DECODE_FAILED",
+                                      "WRONG_FINGERPRINT",
+                                      "NON_FINITE",
+                                      "NOT_POSITIVE_DEFINITE",
+                                      "WRONG_DIMENSION",
+                                      "WRONG_KEY_KIND",
+                                      "UNKNOWN_KEY",
+                                      "UNKNOWN_FACTOR_ID",
+                                      "DUPLICATE_FACTOR_ID",
+                                      "HELD_EXPIRED",
+                                      "COMMAND_FAILED",
+                                      "INTERNAL",
+                                      "INVALID_FIELD",
+                                      "LIMIT_EXCEEDED"};
+  return code >= 0 && code < static_cast<int>(sizeof names / sizeof *names) ? names[code]
+                                                                            : "UNKNOWN";
 }
 
 ViewState::ViewState(lcm::LCM& lcm, std::string channelPrefix, std::string lcmUrl)
@@ -139,8 +161,8 @@ void ViewState::requestEverything() {
   }
 }
 
-void ViewState::factorsMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::factor_batch_t* m,
-                           ViewState* self) {
+void ViewState::factorsMsg(const lcm::ReceiveBuffer*, const std::string&,
+                           const loopd::factor_batch_t* m, ViewState* self) {
   std::lock_guard<std::mutex> l(self->mu_);
   ++self->factorBatches_;
   for (const auto& f : m->factors) {
@@ -372,7 +394,8 @@ std::string ViewState::renderJson(std::uint64_t seq) {
   // Loop closures with both ends in the estimate: [robotA, ordinalA, robotB, ordinalB, state,
   // weight]; state 1 accepted, 0 rejected, 2 no decision (yet). Decisions whose factor was
   // never seen on the factor channel (the view started late) have no endpoints: counted only.
-  std::int64_t accepted = 0, rejected = 0, undecided = 0, unplaced = 0, unmapped = 0, unmappedRejected = 0;
+  std::int64_t accepted = 0, rejected = 0, undecided = 0, unplaced = 0, unmapped = 0,
+               unmappedRejected = 0;
   o += ",\"links\":[";
   first = true;
   for (const auto& [name, cl] : closures_) {

@@ -37,7 +37,8 @@ class ViewState {
   bool statusSeen() const;
 
  private:
-  static void factorsMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::factor_batch_t* m, ViewState* self);
+  static void factorsMsg(const lcm::ReceiveBuffer*, const std::string&,
+                         const loopd::factor_batch_t* m, ViewState* self);
   void onStatus(const loopd::status_t& s);
   void onError(const loopd::error_t& e);
   void touch();
@@ -56,7 +57,7 @@ class ViewState {
     loopd::key_t a, b;
   };
   using FactorName = std::pair<std::string, std::int64_t>;  // (sender, factor id)
-  std::map<FactorName, Closure> closures_;                 // loop closures seen on FACTORS
+  std::map<FactorName, Closure> closures_;                  // loop closures seen on FACTORS
   struct Decision {
     bool accepted = true;
     double weight = 1.0;

@@ -21,12 +21,18 @@ struct Case {
 };
 
 const Case kCases[] = {
-    {"intel.g2o", 45.004696},          {"manhattan.g2o", 3549.0368},
-    {"city10000.g2o", 511.98516},      {"CSAIL.g2o", 40.555129},
-    {"MIT.g2o", 41.163269},            {"kitti_00.g2o", 98.322012},
-    {"sphere2500.g2o", 1351.4019},     {"parking-garage.g2o", 1.2683848},
-    {"torus3D.g2o", 24235.274},        {"smallGrid3D.g2o", 1035.8507},
-    {"tinyGrid3D.g2o", 18.627819},     {"w100.graph", 0.0},
+    {"intel.g2o", 45.004696},
+    {"manhattan.g2o", 3549.0368},
+    {"city10000.g2o", 511.98516},
+    {"CSAIL.g2o", 40.555129},
+    {"MIT.g2o", 41.163269},
+    {"kitti_00.g2o", 98.322012},
+    {"sphere2500.g2o", 1351.4019},
+    {"parking-garage.g2o", 1.2683848},
+    {"torus3D.g2o", 24235.274},
+    {"smallGrid3D.g2o", 1035.8507},
+    {"tinyGrid3D.g2o", 18.627819},
+    {"w100.graph", 0.0},
     // No published optimum; LM, GN-from-LM and Dogleg all end at 227029.94 here. Its large
     // residuals make Gauss–Newton-type steps converge linearly: it needs the iterations.
     {"victoria_park.txt", 227029.94, 400},

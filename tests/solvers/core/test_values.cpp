@@ -54,7 +54,8 @@ TEST(Key, OrderingIsRobotThenKindThenIndex) {
   EXPECT_LT(makeKey(3, KeyKind::Anchor, kMaxKeyIndex), makeKey(3, KeyKind::Switch, 0));
   // Index orders within a kind.
   EXPECT_LT(poseKey(9, 2), poseKey(10, 2));
-  EXPECT_LT(makeKey(kMaxRobotId - 1, KeyKind::Switch, kMaxKeyIndex), makeKey(kMaxRobotId, KeyKind::Pose, 0));
+  EXPECT_LT(makeKey(kMaxRobotId - 1, KeyKind::Switch, kMaxKeyIndex),
+            makeKey(kMaxRobotId, KeyKind::Pose, 0));
 
   std::mt19937 rng(21);
   std::uniform_int_distribution<std::uint32_t> robot(0, 5);
@@ -124,8 +125,8 @@ TEST(Values, InsertSlotAndGetEveryType) {
   EXPECT_TRUE(v.contains(landmarkKey(0)));
   EXPECT_FALSE(v.contains(landmarkKey(2)));
   EXPECT_EQ(v.key(2), landmarkKey(0));
-  EXPECT_EQ(v.keys(), (std::vector<Key>{poseKey(0), poseKey(1, 1), landmarkKey(0),
-                                        landmarkKey(1), makeKey(0, KeyKind::Switch, 0)}));
+  EXPECT_EQ(v.keys(), (std::vector<Key>{poseKey(0), poseKey(1, 1), landmarkKey(0), landmarkKey(1),
+                                        makeKey(0, KeyKind::Switch, 0)}));
   EXPECT_EQ(v.type(0), VarType::SE2);
   EXPECT_EQ(v.type(1), VarType::SE3);
   EXPECT_EQ(v.type(2), VarType::Point2);

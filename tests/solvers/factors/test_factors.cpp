@@ -71,8 +71,10 @@ Vec6 referenceLogSE3(const Mat4& T) {
   Mat3 P;
   P << 0.0, -phi.z(), phi.y(), phi.z(), 0.0, -phi.x(), -phi.y(), phi.x(), 0.0;
   Mat3 V = Mat3::Identity();
-  if (th > 1e-8) V += (1.0 - std::cos(th)) / (th * th) * P + (th - std::sin(th)) / (th * th * th) * P * P;
-  else V += 0.5 * P + P * P / 6.0;
+  if (th > 1e-8)
+    V += (1.0 - std::cos(th)) / (th * th) * P + (th - std::sin(th)) / (th * th * th) * P * P;
+  else
+    V += 0.5 * P + P * P / 6.0;
   Vec6 e;
   e.head<3>() = V.inverse() * T.topRightCorner<3, 1>();
   e.tail<3>() = phi;
@@ -153,14 +155,15 @@ std::vector<Case> betweenSE2Cases() {
   std::mt19937 rng(101);
   std::vector<Case> cases;
   auto add = [&](const std::string& name, const SE2& xi, const SE2& xj, const SE2& z) {
-    Case c{name, std::make_shared<BetweenFactorSE2>(poseKey(1), poseKey(2), z,
-                                                    randomInformation<3>(rng)),
+    Case c{name,
+           std::make_shared<BetweenFactorSE2>(poseKey(1), poseKey(2), z, randomInformation<3>(rng)),
            {}};
     c.values.insert(poseKey(1), xi);
     c.values.insert(poseKey(2), xj);
     cases.push_back(std::move(c));
   };
-  for (int i = 0; i < 8; ++i) add("random" + std::to_string(i), randomSE2(rng), randomSE2(rng), randomSE2(rng));
+  for (int i = 0; i < 8; ++i)
+    add("random" + std::to_string(i), randomSE2(rng), randomSE2(rng), randomSE2(rng));
   add("coincident poses, identity measurement", SE2(1.0, 2.0, 0.3), SE2(1.0, 2.0, 0.3), SE2());
   add("at measurement", SE2(1.0, 2.0, 3.0), SE2(1.0, 2.0, 3.0) * SE2(0.5, -0.2, 0.4),
       SE2(0.5, -0.2, 0.4));
@@ -176,14 +179,15 @@ std::vector<Case> betweenSE3Cases() {
   std::mt19937 rng(102);
   std::vector<Case> cases;
   auto add = [&](const std::string& name, const SE3& xi, const SE3& xj, const SE3& z) {
-    Case c{name, std::make_shared<BetweenFactorSE3>(poseKey(1), poseKey(2), z,
-                                                    randomInformation<6>(rng)),
+    Case c{name,
+           std::make_shared<BetweenFactorSE3>(poseKey(1), poseKey(2), z, randomInformation<6>(rng)),
            {}};
     c.values.insert(poseKey(1), xi);
     c.values.insert(poseKey(2), xj);
     cases.push_back(std::move(c));
   };
-  for (int i = 0; i < 8; ++i) add("random" + std::to_string(i), randomSE3(rng), randomSE3(rng), randomSE3(rng));
+  for (int i = 0; i < 8; ++i)
+    add("random" + std::to_string(i), randomSE3(rng), randomSE3(rng), randomSE3(rng));
   const SE3 X = randomSE3(rng), Z = randomSE3(rng);
   add("coincident poses, identity measurement", X, X, SE3());
   add("at measurement", X, X * Z, Z);
@@ -201,13 +205,15 @@ std::vector<Case> priorCases() {
   std::vector<Case> cases;
   auto addSE2 = [&](const std::string& name, const SE2& x, const SE2& z) {
     Case c{"PriorSE2 " + name,
-           std::make_shared<PriorFactorSE2>(poseKey(4), z, randomInformation<3>(rng)), {}};
+           std::make_shared<PriorFactorSE2>(poseKey(4), z, randomInformation<3>(rng)),
+           {}};
     c.values.insert(poseKey(4), x);
     cases.push_back(std::move(c));
   };
   auto addSE3 = [&](const std::string& name, const SE3& x, const SE3& z) {
     Case c{"PriorSE3 " + name,
-           std::make_shared<PriorFactorSE3>(poseKey(4), z, randomInformation<6>(rng)), {}};
+           std::make_shared<PriorFactorSE3>(poseKey(4), z, randomInformation<6>(rng)),
+           {}};
     c.values.insert(poseKey(4), x);
     cases.push_back(std::move(c));
   };
@@ -249,7 +255,8 @@ std::vector<Case> landmarkCases() {
     cases.push_back(std::move(c));
   };
   auto pp2 = [&](const Vec2& z) {
-    return std::make_shared<PosePointFactor2>(poseKey(3), landmarkKey(5), z, randomInformation<2>(rng));
+    return std::make_shared<PosePointFactor2>(poseKey(3), landmarkKey(5), z,
+                                              randomInformation<2>(rng));
   };
   auto br2 = [&](double b, double r) {
     return std::make_shared<BearingRangeFactor2>(poseKey(3), landmarkKey(5), Vec2(b, r),
@@ -263,7 +270,8 @@ std::vector<Case> landmarkCases() {
   }
   const SE2 X(1.0, -2.0, 2.5);
   add2("PosePoint2 landmark on the pose", pp2(Vec2(1.0, 0.0)), X, X.t());
-  add2("PosePoint2 landmark 1e-6 from the pose", pp2(Vec2(1.0, 0.0)), X, X.transform(Vec2(1e-6, 0)));
+  add2("PosePoint2 landmark 1e-6 from the pose", pp2(Vec2(1.0, 0.0)), X,
+       X.transform(Vec2(1e-6, 0)));
   add2("BearingRange2 landmark straight behind, bearing π", br2(kPi, 2.0), X,
        X.transform(Vec2(-2.0, 0.0)));
   add2("BearingRange2 landmark straight behind, bearing −π+1e-3", br2(-kPi + 1e-3, 2.0), X,
@@ -275,7 +283,8 @@ std::vector<Case> landmarkCases() {
 
   auto add3 = [&](const std::string& name, const Vec3& z, const SE3& x, const Vec3& p) {
     Case c{name,
-           std::make_shared<PosePointFactor3>(poseKey(3), landmarkKey(5), z, randomInformation<3>(rng)),
+           std::make_shared<PosePointFactor3>(poseKey(3), landmarkKey(5), z,
+                                              randomInformation<3>(rng)),
            {}};
     c.values.insert(poseKey(3), x);
     c.values.insertPoint3(landmarkKey(5), p);
@@ -316,8 +325,8 @@ TEST(FactorJacobians, EveryTypeCovered) {
   std::set<std::string> names;
   for (const Case& c : allCases()) names.insert(c.factor->typeName());
   EXPECT_EQ(names, (std::set<std::string>{"BetweenSE2", "BetweenSE3", "PriorSE2", "PriorSE3",
-                                           "PriorPoint2", "PriorPoint3", "PosePoint2",
-                                           "PosePoint3", "BearingRange2"}));
+                                          "PriorPoint2", "PriorPoint3", "PosePoint2", "PosePoint3",
+                                          "BearingRange2"}));
 }
 
 // The checker itself: a Jacobian off by 1e-4 in one entry must be caught.
@@ -326,7 +335,9 @@ class CorruptedFactor final : public Factor {
   CorruptedFactor(std::shared_ptr<Factor> inner, int key, int entry)
       : Factor({{inner->key(0), inner->varType(0)}, {inner->key(1), inner->varType(1)}},
                inner->dim(), inner->role()),
-        inner_(std::move(inner)), key_(key), entry_(entry) {}
+        inner_(std::move(inner)),
+        key_(key),
+        entry_(entry) {}
   void evaluate(const double* const* x, double* r, double* const* J) const override {
     inner_->evaluate(x, r, J);
     if (J != nullptr && J[key_] != nullptr) J[key_][entry_] += 1e-4;
@@ -372,7 +383,8 @@ TEST(FactorResidual, ZeroAtMeasurement) {
     v.insert(poseKey(11), Xi * Z3);
     v.insertPoint2(landmarkKey(0), xi.transform(p2));
     v.insertPoint3(landmarkKey(1), Xi.transform(p3));
-    v.insertPoint2(landmarkKey(2), xi.transform(range * Vec2(std::cos(bearing), std::sin(bearing))));
+    v.insertPoint2(landmarkKey(2),
+                   xi.transform(range * Vec2(std::cos(bearing), std::sin(bearing))));
     v.insertPoint2(landmarkKey(3), p2);
     v.insertPoint3(landmarkKey(4), p3);
 
@@ -383,8 +395,10 @@ TEST(FactorResidual, ZeroAtMeasurement) {
         std::make_shared<PriorFactorSE3>(poseKey(10), Xi, randomInformation<6>(rng)),
         std::make_shared<PriorFactorPoint2>(landmarkKey(3), p2, randomInformation<2>(rng)),
         std::make_shared<PriorFactorPoint3>(landmarkKey(4), p3, randomInformation<3>(rng)),
-        std::make_shared<PosePointFactor2>(poseKey(0), landmarkKey(0), p2, randomInformation<2>(rng)),
-        std::make_shared<PosePointFactor3>(poseKey(10), landmarkKey(1), p3, randomInformation<3>(rng)),
+        std::make_shared<PosePointFactor2>(poseKey(0), landmarkKey(0), p2,
+                                           randomInformation<2>(rng)),
+        std::make_shared<PosePointFactor3>(poseKey(10), landmarkKey(1), p3,
+                                           randomInformation<3>(rng)),
         std::make_shared<BearingRangeFactor2>(poseKey(0), landmarkKey(2), Vec2(bearing, range),
                                               randomInformation<2>(rng)),
     };
@@ -399,7 +413,8 @@ TEST(FactorResidual, BearingRangeLandmarkOnThePoseIsFinite) {
   Values v;
   v.insert(poseKey(0), SE2(1.0, 2.0, 0.3));
   v.insertPoint2(landmarkKey(0), Vec2(1.0, 2.0));
-  const BearingRangeFactor2 f(poseKey(0), landmarkKey(0), Vec2(0.5, 1.0), Eigen::Matrix2d::Identity());
+  const BearingRangeFactor2 f(poseKey(0), landmarkKey(0), Vec2(0.5, 1.0),
+                              Eigen::Matrix2d::Identity());
   const double* x[2] = {v.data(0), v.data(1)};
   double r[2];
   JacobianBlock j0, j1;
@@ -423,7 +438,8 @@ TEST(FactorChi2, BetweenSE2MatchesG2oError) {
     v.insert(poseKey(0), xi);
     v.insert(poseKey(1), xj);
     // g2o: e = (x, y, wrapped θ) of Z⁻¹·Xi⁻¹·Xj, from homogeneous matrices.
-    const Eigen::Matrix3d T = homogeneous(z).inverse() * homogeneous(xi).inverse() * homogeneous(xj);
+    const Eigen::Matrix3d T =
+        homogeneous(z).inverse() * homogeneous(xi).inverse() * homogeneous(xj);
     const Eigen::Vector3d e(T(0, 2), T(1, 2), std::atan2(T(1, 0), T(0, 0)));
     EXPECT_NEAR(f.chi2(v), e.dot(info * e), 1e-9 * (1.0 + e.dot(info * e)));
     // Whitened with the upper Cholesky factor of Ω.
@@ -471,12 +487,15 @@ TEST(FactorChi2, LandmarkAndPriorErrors) {
     const Eigen::Matrix2d I2 = randomInformation<2>(rng);
     const Mat3 I3 = randomInformation<3>(rng);
     const Eigen::Vector2d e_pp2 = rot2(x.theta).transpose() * (p - x.t()) - z2;
-    EXPECT_NEAR(PosePointFactor2(poseKey(0), landmarkKey(0), z2, I2).chi2(v), e_pp2.dot(I2 * e_pp2), 1e-9);
+    EXPECT_NEAR(PosePointFactor2(poseKey(0), landmarkKey(0), z2, I2).chi2(v), e_pp2.dot(I2 * e_pp2),
+                1e-9);
     const Vec3 e_pp3 = X.R.transpose() * (q - X.t) - z3;
-    EXPECT_NEAR(PosePointFactor3(poseKey(1), landmarkKey(1), z3, I3).chi2(v), e_pp3.dot(I3 * e_pp3), 1e-8);
+    EXPECT_NEAR(PosePointFactor3(poseKey(1), landmarkKey(1), z3, I3).chi2(v), e_pp3.dot(I3 * e_pp3),
+                1e-8);
     const Vec2 lv = rot2(x.theta).transpose() * (p - x.t());
     const Eigen::Vector2d e_br(wrapAngle(std::atan2(lv.y(), lv.x()) - br[0]), lv.norm() - br[1]);
-    EXPECT_NEAR(BearingRangeFactor2(poseKey(0), landmarkKey(0), br, I2).chi2(v), e_br.dot(I2 * e_br), 1e-9);
+    EXPECT_NEAR(BearingRangeFactor2(poseKey(0), landmarkKey(0), br, I2).chi2(v),
+                e_br.dot(I2 * e_br), 1e-9);
     const Eigen::Matrix3d Tp = homogeneous(zx).inverse() * homogeneous(x);
     const Eigen::Vector3d e_ps(Tp(0, 2), Tp(1, 2), std::atan2(Tp(1, 0), Tp(0, 0)));
     EXPECT_NEAR(PriorFactorSE2(poseKey(0), zx, I3).chi2(v), e_ps.dot(I3 * e_ps), 1e-9);
@@ -520,7 +539,8 @@ TEST(SqrtInformation, RejectsBadMatrices) {
   expectRejected<1>(Eigen::Matrix<double, 1, 1>(0.0), "zero");
   expectRejected<1>(Eigen::Matrix<double, 1, 1>(-1.0), "negative");
   expectRejected<2>(Eigen::Matrix2d::Zero(), "zero 2x2");
-  expectRejected<3>(Eigen::Vector3d(1.0, -1.0, 1.0).asDiagonal().toDenseMatrix(), "indefinite diag");
+  expectRejected<3>(Eigen::Vector3d(1.0, -1.0, 1.0).asDiagonal().toDenseMatrix(),
+                    "indefinite diag");
   expectRejected<3>(Eigen::Vector3d(1.0, 0.0, 1.0).asDiagonal().toDenseMatrix(), "singular diag");
   expectRejected<3>(-Eigen::Matrix3d::Identity(), "negative definite");
   Eigen::Matrix2d indef;
@@ -568,8 +588,10 @@ TEST(SqrtInformation, FactorConstructorsValidate) {
   EXPECT_THROW(PriorFactorSE3(poseKey(0), SE3(), bad6), std::invalid_argument);
   EXPECT_THROW(PriorFactorPoint2(landmarkKey(0), Vec2::Zero(), bad2), std::invalid_argument);
   EXPECT_THROW(PriorFactorPoint3(landmarkKey(0), Vec3::Zero(), bad3), std::invalid_argument);
-  EXPECT_THROW(PosePointFactor2(poseKey(0), landmarkKey(0), Vec2::Zero(), bad2), std::invalid_argument);
-  EXPECT_THROW(PosePointFactor3(poseKey(0), landmarkKey(0), Vec3::Zero(), bad3), std::invalid_argument);
+  EXPECT_THROW(PosePointFactor2(poseKey(0), landmarkKey(0), Vec2::Zero(), bad2),
+               std::invalid_argument);
+  EXPECT_THROW(PosePointFactor3(poseKey(0), landmarkKey(0), Vec3::Zero(), bad3),
+               std::invalid_argument);
   EXPECT_THROW(BearingRangeFactor2(poseKey(0), landmarkKey(0), Vec2(0.0, 1.0), bad2),
                std::invalid_argument);
 }
@@ -593,7 +615,8 @@ TEST(Factor, MetadataAndRoles) {
   const PriorFactorSE3 p(poseKey(0), SE3(), Mat6::Identity());
   EXPECT_EQ(p.size(), 1);
   EXPECT_EQ(p.role(), FactorRole::Prior);
-  const BearingRangeFactor2 l(poseKey(0), landmarkKey(3), Vec2(0.0, 1.0), Eigen::Matrix2d::Identity());
+  const BearingRangeFactor2 l(poseKey(0), landmarkKey(3), Vec2(0.0, 1.0),
+                              Eigen::Matrix2d::Identity());
   EXPECT_EQ(l.role(), FactorRole::Landmark);
   EXPECT_EQ(l.varType(1), VarType::Point2);
   EXPECT_TRUE(isUncertain(l.role()));
@@ -602,8 +625,9 @@ TEST(Factor, MetadataAndRoles) {
   EXPECT_EQ(pp3.varType(0), VarType::SE3);
   EXPECT_EQ(pp3.varType(1), VarType::Point3);
   EXPECT_STREQ(factorRoleName(FactorRole::LoopClosure), "loop_closure");
-  EXPECT_STREQ(PriorFactorPoint2(landmarkKey(0), Vec2::Zero(), Eigen::Matrix2d::Identity()).typeName(),
-               "PriorPoint2");
+  EXPECT_STREQ(
+      PriorFactorPoint2(landmarkKey(0), Vec2::Zero(), Eigen::Matrix2d::Identity()).typeName(),
+      "PriorPoint2");
   EXPECT_STREQ(PriorFactorPoint3(landmarkKey(0), Vec3::Zero(), Mat3::Identity()).typeName(),
                "PriorPoint3");
 }

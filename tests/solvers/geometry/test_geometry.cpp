@@ -136,7 +136,7 @@ TEST(SO3, ExpLogNearPi) {
   }
   // Exactly π (about each axis and a generic one): Log is ±ω, Exp(Log R) = R.
   for (const Vec3& axis : std::vector<Vec3>{Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ(),
-                                             Vec3(1.0, -2.0, 0.5).normalized()}) {
+                                            Vec3(1.0, -2.0, 0.5).normalized()}) {
     const Mat3 R = Eigen::AngleAxisd(kPi, axis).toRotationMatrix();
     const Vec3 l = logSO3(R);
     EXPECT_NEAR(l.norm(), kPi, 1e-9);
@@ -230,8 +230,8 @@ TEST(SO3, ProjectToSO3) {
 
 TEST(SE2, WrapAngleEdgeCases) {
   EXPECT_DOUBLE_EQ(wrapAngle(0.0), 0.0);
-  EXPECT_DOUBLE_EQ(wrapAngle(kPi), kPi);    // (−π, π]: π stays
-  EXPECT_DOUBLE_EQ(wrapAngle(-kPi), kPi);   // −π maps to π
+  EXPECT_DOUBLE_EQ(wrapAngle(kPi), kPi);   // (−π, π]: π stays
+  EXPECT_DOUBLE_EQ(wrapAngle(-kPi), kPi);  // −π maps to π
   EXPECT_NEAR(wrapAngle(2.0 * kPi), 0.0, 1e-15);
   EXPECT_NEAR(wrapAngle(-2.0 * kPi), 0.0, 1e-15);
   EXPECT_NEAR(wrapAngle(kPi + 1e-9), -kPi + 1e-9, 1e-15);
@@ -411,11 +411,12 @@ TEST(SE3, RightJacobianInverseMatchesNumerical) {
     const Mat6 an = rightJacobianInverseSE3(xi);
     const Mat6 num = numericalJrInvSE3(xi);
     EXPECT_LT((an - num).norm(), 1e-6 * (1.0 + num.norm()))
-        << "xi = " << xi.transpose() << "\nanalytic\n" << an << "\nnumerical\n" << num;
+        << "xi = " << xi.transpose() << "\nanalytic\n"
+        << an << "\nnumerical\n"
+        << num;
     // First-order identity with a small step.
     const Vec6 d = randomTwist(rng, 1.0, 1.0) * 1e-7;
-    EXPECT_LT((logSE3(expSE3(xi) * expSE3(d)) - (xi + an * d)).norm(), 1e-11)
-        << xi.transpose();
+    EXPECT_LT((logSE3(expSE3(xi) * expSE3(d)) - (xi + an * d)).norm(), 1e-11) << xi.transpose();
   }
 }
 

@@ -32,9 +32,13 @@ namespace {
 
 using Eigen::MatrixXd;
 
-std::string dataset(const std::string& name) { return std::string(LOOPD_DATASETS_DIR) + "/" + name; }
+std::string dataset(const std::string& name) {
+  return std::string(LOOPD_DATASETS_DIR) + "/" + name;
+}
 
-PoseGraphProblem load(const std::string& name) { return buildProblem(io::readDataset(dataset(name))); }
+PoseGraphProblem load(const std::string& name) {
+  return buildProblem(io::readDataset(dataset(name)));
+}
 
 // The first `poses` poses of a pose graph and the factors among them.
 PoseGraphProblem prefix(const PoseGraphProblem& p, int poses) {
@@ -43,7 +47,8 @@ PoseGraphProblem prefix(const PoseGraphProblem& p, int poses) {
   out.firstPose = p.firstPose;
   std::unordered_set<Key> keep;
   for (int s = 0; s < p.initial.size(); ++s)
-    if (keyKind(p.initial.key(s)) == KeyKind::Pose && keyIndex(p.initial.key(s)) < static_cast<uint64_t>(poses)) {
+    if (keyKind(p.initial.key(s)) == KeyKind::Pose &&
+        keyIndex(p.initial.key(s)) < static_cast<uint64_t>(poses)) {
       out.initial.insertFrom(p.initial, s);
       keep.insert(p.initial.key(s));
     }
@@ -106,11 +111,14 @@ void expectEqualsBatchOptimum(const PoseGraphProblem& p) {
   EXPECT_NEAR(ci, cb, 1e-6 * cb);
   double worst = 0.0;
   for (int s = 0; s < batch.size(); ++s)
-    worst = std::max(worst, tangentDistance(batch, s, isam.estimate(), isam.estimate().slot(batch.key(s))));
+    worst = std::max(
+        worst, tangentDistance(batch, s, isam.estimate(), isam.estimate().slot(batch.key(s))));
   EXPECT_LT(worst, 1e-6);
 }
 
-TEST(Isam2, EqualsBatchOptimumOnIntelPrefix) { expectEqualsBatchOptimum(prefix(load("intel.g2o"), 300)); }
+TEST(Isam2, EqualsBatchOptimumOnIntelPrefix) {
+  expectEqualsBatchOptimum(prefix(load("intel.g2o"), 300));
+}
 
 TEST(Isam2, EqualsBatchOptimumOnSmallGrid3D) { expectEqualsBatchOptimum(load("smallGrid3D.g2o")); }
 
@@ -244,7 +252,8 @@ TEST(Isam2, InvalidUpdatesThrowAndChangeNothing) {
     EXPECT_THROW(isam.update(u), std::invalid_argument);
     EXPECT_EQ(isam.graph().size(), factors);
     ASSERT_EQ(isam.estimate().size(), before.size());
-    for (int s = 0; s < before.size(); ++s) EXPECT_EQ(tangentDistance(before, s, isam.estimate(), s), 0.0);
+    for (int s = 0; s < before.size(); ++s)
+      EXPECT_EQ(tangentDistance(before, s, isam.estimate(), s), 0.0);
   };
   BackendUpdate unknownId;
   unknownId.removals = {987654};
@@ -335,8 +344,10 @@ SmallGraph makeSmallGraph(bool is3d, unsigned seed) {
   for (int i = 0; i < poses; ++i) {
     BackendUpdate u;
     if (i == 0) {
-      if (is3d) u.initial.insert(poseKey(0), SE3());
-      else u.initial.insert(poseKey(0), SE2(0, 0, 0));
+      if (is3d)
+        u.initial.insert(poseKey(0), SE3());
+      else
+        u.initial.insert(poseKey(0), SE2(0, 0, 0));
     } else {
       u.factors.push_back(between(i - 1, i, FactorRole::Odometry));
       if (i >= 5 && i % 3 == 0) u.factors.push_back(between(i - 5, i, FactorRole::LoopClosure));
@@ -356,10 +367,14 @@ void expectMarginalsMatchDenseInverse(bool is3d) {
   const Values& x = isam.estimate();
   // The same gauge: information 1e8·I on the first pose at its initial value.
   std::vector<FactorPtr> gauge;
-  if (is3d) gauge.push_back(std::make_shared<PriorFactorSE3>(poseKey(0), SE3(), 1e8 * Mat6::Identity()));
-  else gauge.push_back(std::make_shared<PriorFactorSE2>(poseKey(0), SE2(0, 0, 0), 1e8 * Eigen::Matrix3d::Identity()));
+  if (is3d)
+    gauge.push_back(std::make_shared<PriorFactorSE3>(poseKey(0), SE3(), 1e8 * Mat6::Identity()));
+  else
+    gauge.push_back(std::make_shared<PriorFactorSE2>(poseKey(0), SE2(0, 0, 0),
+                                                     1e8 * Eigen::Matrix3d::Identity()));
   std::vector<int> off;
-  const MatrixXd Sigma = denseInformation(isam.graph(), gauge, isam.linearizationPoint(), off).inverse();
+  const MatrixXd Sigma =
+      denseInformation(isam.graph(), gauge, isam.linearizationPoint(), off).inverse();
   auto block = [&](Key a, Key b) {
     const int sa = x.slot(a), sb = x.slot(b);
     return MatrixXd(Sigma.block(off[sa], off[sb], off[sa + 1] - off[sa], off[sb + 1] - off[sb]));
@@ -424,7 +439,8 @@ TEST(Isam2, VictoriaParkCovariancesAreSymmetricPositiveDefinite) {
     EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << keyToString(keys[i]);
   }
   // A joint marginal across the tree is symmetric positive definite too.
-  const MatrixXd J = backend->marginalCovariance({keys.front(), keys[keys.size() / 2], keys.back()});
+  const MatrixXd J =
+      backend->marginalCovariance({keys.front(), keys[keys.size() / 2], keys.back()});
   EXPECT_LT((J - J.transpose()).norm(), 1e-9 * J.norm());
   EXPECT_GT(Eigen::SelfAdjointEigenSolver<MatrixXd>(J).eigenvalues().minCoeff(), 0.0);
 }

@@ -13,7 +13,8 @@ namespace {
 
 std::string vertices(int n) {
   std::string s;
-  for (int i = 0; i < n; ++i) s += "VERTEX_SE2 " + std::to_string(i) + " " + std::to_string(i) + " 0 0\n";
+  for (int i = 0; i < n; ++i)
+    s += "VERTEX_SE2 " + std::to_string(i) + " " + std::to_string(i) + " 0 0\n";
   return s;
 }
 std::string edge(int a, int b) {
@@ -64,8 +65,7 @@ TEST(Hypotheses, MalformedGroupsAreRefusedWithTheirLine) {
   expectError(head + "HYPOTHESES 2 maybe\n", 8, "expected 'null'");
   expectError(head + "HYPOTHESES 2 null 3\n", 8, "a count and an optional 'null'");
   expectError(head + "HYPOTHESES x\n", 8, "");
-  expectError(head + "HYPOTHESES 2\n" + edge(3, 0) + "EDGE_SE2_XY 3 0 1 0 1 0 1\n", 10,
-              "one type");
+  expectError(head + "HYPOTHESES 2\n" + edge(3, 0) + "EDGE_SE2_XY 3 0 1 0 1 0 1\n", 10, "one type");
   expectError("HYPOTHESES 2\n" + edge(1, 3) + edge(1, 2) + odometry(4), 1, "vertex lines");
 }
 
@@ -85,8 +85,8 @@ TEST(Hypotheses, WriterRoundTrip) {
 TEST(Hypotheses, ProblemAndScheduleKeepGroupsApart) {
   // The group joins at pose 5, its latest key, even though two alternatives end earlier; an
   // alternative between consecutive poses is still a loop closure, never trusted odometry.
-  const Dataset d = read(vertices(6) + odometry(6) + "HYPOTHESES 3\n" + edge(3, 0) +
-                         edge(5, 1) + edge(2, 3));
+  const Dataset d =
+      read(vertices(6) + odometry(6) + "HYPOTHESES 3\n" + edge(3, 0) + edge(5, 1) + edge(2, 3));
   const PoseGraphProblem p = buildProblem(d);
   ASSERT_EQ(p.ambiguous.size(), 1u);
   EXPECT_EQ(p.ambiguous[0].factors, (std::vector<int>{5, 6, 7}));

@@ -49,10 +49,11 @@ BlockMatrix randomBlockMatrix(unsigned seed, int nb, const std::vector<int>& siz
   const int n = m.blockOffsets.back();
   std::vector<std::vector<char>> link(nb, std::vector<char>(nb, 0));
   for (int j = 0; j < nb; ++j)
-    for (int i = 0; i < j; ++i)
-      link[i][j] = unit(rng) < probability(i, j);
+    for (int i = 0; i < j; ++i) link[i][j] = unit(rng) < probability(i, j);
   m.dense = MatrixXd::Zero(n, n);
-  auto range = [&](int b) { return std::make_pair(m.blockOffsets[b], m.blockOffsets[b + 1] - m.blockOffsets[b]); };
+  auto range = [&](int b) {
+    return std::make_pair(m.blockOffsets[b], m.blockOffsets[b + 1] - m.blockOffsets[b]);
+  };
   for (int j = 0; j < nb; ++j)
     for (int i = 0; i < j; ++i)
       if (link[i][j]) {
@@ -66,7 +67,8 @@ BlockMatrix randomBlockMatrix(unsigned seed, int nb, const std::vector<int>& siz
     for (int r = 0; r < d; ++r)
       for (int c = r + 1; c < d; ++c) m.dense(o + r, o + c) = m.dense(o + c, o + r) = 0.3 * u(rng);
   }
-  for (int k = 0; k < n; ++k) m.dense(k, k) = m.dense.row(k).cwiseAbs().sum() + 0.5 + std::abs(u(rng));
+  for (int k = 0; k < n; ++k)
+    m.dense(k, k) = m.dense.row(k).cwiseAbs().sum() + 0.5 + std::abs(u(rng));
 
   m.columnStart.push_back(0);
   for (int j = 0; j < nb; ++j) {
@@ -89,9 +91,8 @@ BlockMatrix randomBlockMatrix(unsigned seed, int nb, const std::vector<int>& siz
 
 BlockMatrix randomBlockMatrix(unsigned seed, int nb, const std::vector<int>& sizes, double density,
                               bool chain = true) {
-  return randomBlockMatrix(seed, nb, sizes, [&](int i, int j) {
-    return chain && i + 1 == j ? 1.0 : density;
-  });
+  return randomBlockMatrix(seed, nb, sizes,
+                           [&](int i, int j) { return chain && i + 1 == j ? 1.0 : density; });
 }
 
 double relativeError(const MatrixXd& x, const MatrixXd& ref) {
@@ -151,13 +152,15 @@ void expectMatchesDense(const BlockMatrix& m) {
 }
 
 TEST(BlockCholesky, RandomMixedBlockSizesMatchDenseLLT) {
-  const std::vector<std::vector<int>> sizeSets = {{1, 2, 3, 4, 5, 6}, {3}, {6}, {2, 3}, {3, 6}, {1}};
+  const std::vector<std::vector<int>> sizeSets = {
+      {1, 2, 3, 4, 5, 6}, {3}, {6}, {2, 3}, {3, 6}, {1}};
   unsigned seed = 1;
   for (const auto& sizes : sizeSets)
     for (int nb : {1, 2, 5, 17, 40})
       for (double density : {0.0, 0.05, 0.2, 0.6}) {
-        SCOPED_TRACE(::testing::Message() << "seed " << seed << " nb " << nb << " density " << density
-                                          << " sizes " << sizes.size() << "/" << sizes.front());
+        SCOPED_TRACE(::testing::Message()
+                     << "seed " << seed << " nb " << nb << " density " << density << " sizes "
+                     << sizes.size() << "/" << sizes.front());
         expectMatchesDense(randomBlockMatrix(seed++, nb, sizes, density));
       }
 }
@@ -237,7 +240,8 @@ class DatasetHessian : public ::testing::TestWithParam<DatasetCase> {};
 
 // y = H x for H given by its upper-triangle CSC (diagonal blocks stored whole, lower half
 // ignored).
-VectorXd multiply(const HessianLayout& layout, const std::vector<double>& values, const VectorXd& x) {
+VectorXd multiply(const HessianLayout& layout, const std::vector<double>& values,
+                  const VectorXd& x) {
   const auto& cs = layout.columnStart();
   const auto& ri = layout.rowIndex();
   VectorXd y = VectorXd::Zero(x.size());
@@ -284,7 +288,8 @@ TEST_P(DatasetHessian, MatchesCholmod) {
   for (int c = 0; c < 3; ++c) {
     SCOPED_TRACE(::testing::Message() << "column " << c);
     const double bnorm = B.col(c).norm();
-    const double resCholmod = (multiply(layout, ne.hessian(), ref.col(c)) - B.col(c)).norm() / bnorm;
+    const double resCholmod =
+        (multiply(layout, ne.hessian(), ref.col(c)) - B.col(c)).norm() / bnorm;
     const double resBlock = (multiply(layout, ne.hessian(), X.col(c)) - B.col(c)).norm() / bnorm;
     EXPECT_LT(resBlock, std::max(4.0 * resCholmod, 1e-13));
     if (GetParam().wellConditioned) {

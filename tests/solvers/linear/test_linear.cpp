@@ -51,23 +51,23 @@ Problem makeProblem2D(unsigned seed, bool withPrior) {
   std::uniform_real_distribution<double> step(0.5, 1.5), turn(-0.8, 0.8), noise(-0.1, 0.1);
   Problem p;
   std::vector<SE2> truth = {SE2(0.0, 0.0, 0.0)};
-  for (int i = 1; i < kPoses; ++i) truth.push_back(truth.back() * SE2(step(rng), 0.2 * noise(rng), turn(rng)));
+  for (int i = 1; i < kPoses; ++i)
+    truth.push_back(truth.back() * SE2(step(rng), 0.2 * noise(rng), turn(rng)));
   auto noisy = [&](const SE2& z) { return z * SE2(noise(rng), noise(rng), noise(rng)); };
   if (withPrior)
     p.graph.add(std::make_shared<PriorFactorSE2>(poseKey(0), truth[0], randomInformation<3>(rng)));
   for (int i = 0; i + 1 < kPoses; ++i)
-    p.graph.add(std::make_shared<BetweenFactorSE2>(poseKey(i), poseKey(i + 1),
-                                                   noisy(truth[i].between(truth[i + 1])),
-                                                   randomInformation<3>(rng), FactorRole::Odometry));
+    p.graph.add(std::make_shared<BetweenFactorSE2>(
+        poseKey(i), poseKey(i + 1), noisy(truth[i].between(truth[i + 1])),
+        randomInformation<3>(rng), FactorRole::Odometry));
   for (auto [i, j] : kLoops)
-    p.graph.add(std::make_shared<BetweenFactorSE2>(poseKey(i), poseKey(j),
-                                                   noisy(truth[i].between(truth[j])),
-                                                   randomInformation<3>(rng)));
+    p.graph.add(std::make_shared<BetweenFactorSE2>(
+        poseKey(i), poseKey(j), noisy(truth[i].between(truth[j])), randomInformation<3>(rng)));
   const Vec2 l0(2.0, 3.0), l1(-1.0, 4.0);
-  p.graph.add(std::make_shared<PosePointFactor2>(poseKey(3), landmarkKey(0), truth[3].transformTo(l0),
-                                                 randomInformation<2>(rng)));
-  p.graph.add(std::make_shared<PosePointFactor2>(poseKey(8), landmarkKey(0), truth[8].transformTo(l0),
-                                                 randomInformation<2>(rng)));
+  p.graph.add(std::make_shared<PosePointFactor2>(
+      poseKey(3), landmarkKey(0), truth[3].transformTo(l0), randomInformation<2>(rng)));
+  p.graph.add(std::make_shared<PosePointFactor2>(
+      poseKey(8), landmarkKey(0), truth[8].transformTo(l0), randomInformation<2>(rng)));
   const Vec2 v = truth[5].transformTo(l1);
   p.graph.add(std::make_shared<BearingRangeFactor2>(poseKey(5), landmarkKey(1),
                                                     Vec2(std::atan2(v.y(), v.x()), v.norm()),
@@ -103,17 +103,16 @@ Problem makeProblem3D(unsigned seed, bool withPrior) {
   if (withPrior)
     p.graph.add(std::make_shared<PriorFactorSE3>(poseKey(0), truth[0], randomInformation<6>(rng)));
   for (int i = 0; i + 1 < kPoses; ++i)
-    p.graph.add(std::make_shared<BetweenFactorSE3>(poseKey(i), poseKey(i + 1),
-                                                   noisy(truth[i].between(truth[i + 1])),
-                                                   randomInformation<6>(rng), FactorRole::Odometry));
+    p.graph.add(std::make_shared<BetweenFactorSE3>(
+        poseKey(i), poseKey(i + 1), noisy(truth[i].between(truth[i + 1])),
+        randomInformation<6>(rng), FactorRole::Odometry));
   for (auto [i, j] : kLoops)
-    p.graph.add(std::make_shared<BetweenFactorSE3>(poseKey(i), poseKey(j),
-                                                   noisy(truth[i].between(truth[j])),
-                                                   randomInformation<6>(rng)));
+    p.graph.add(std::make_shared<BetweenFactorSE3>(
+        poseKey(i), poseKey(j), noisy(truth[i].between(truth[j])), randomInformation<6>(rng)));
   const Vec3 l0(2.0, 3.0, 1.0);
   for (int i : {3, 8, 10})
-    p.graph.add(std::make_shared<PosePointFactor3>(poseKey(i), landmarkKey(0), truth[i].transformTo(l0),
-                                                   randomInformation<3>(rng)));
+    p.graph.add(std::make_shared<PosePointFactor3>(
+        poseKey(i), landmarkKey(0), truth[i].transformTo(l0), randomInformation<3>(rng)));
   p.values.insertPoint3(landmarkKey(0), l0 + Vec3(0.1 * u(rng), 0.1 * u(rng), 0.1 * u(rng)));
   for (int i = 0; i < kPoses; ++i) p.values.insert(poseKey(i), noisy(truth[i]));
   return p;
@@ -127,7 +126,8 @@ struct Dense {
 
 // Dense JᵀWJ and JᵀWr straight from Factor::evaluate, columns placed by slotOffset().
 Dense denseNormalEquations(const FactorGraph& graph, const Values& values,
-                           const HessianLayout& layout, const std::vector<double>* weights = nullptr) {
+                           const HessianLayout& layout,
+                           const std::vector<double>* weights = nullptr) {
   const int n = layout.dimension();
   Dense d;
   d.H = MatrixXd::Zero(n, n);
@@ -353,8 +353,10 @@ TEST_P(LinearTest, LayoutRejectsMissingKeyAndWrongType) {
   EXPECT_THROW(HessianLayout(p.graph, missing, {}), std::invalid_argument);
   Values wrong;
   for (int s = 0; s < p.values.size(); ++s) {
-    if (p.values.key(s) == poseKey(5)) wrong.insertPoint3(poseKey(5), Vec3::Zero());
-    else wrong.insertFrom(p.values, s);
+    if (p.values.key(s) == poseKey(5))
+      wrong.insertPoint3(poseKey(5), Vec3::Zero());
+    else
+      wrong.insertFrom(p.values, s);
   }
   EXPECT_THROW(HessianLayout(p.graph, wrong, {}), std::invalid_argument);
 }
@@ -429,8 +431,10 @@ TEST_P(LinearTest, RefactorizeReusesAnalysisAndGaussNewtonStepDescends) {
     const MatrixXd H = denseFromCsc(layout, ne.hessian());
     std::vector<double> dx(layout.dimension());
     chol.solve(ne.gradient().data(), dx.data());
-    const VectorXd xd = H.llt().solve(Eigen::Map<const VectorXd>(ne.gradient().data(), layout.dimension()));
-    EXPECT_LT((Eigen::Map<const VectorXd>(dx.data(), dx.size()) - xd).norm(), 1e-9 * (1.0 + xd.norm()));
+    const VectorXd xd =
+        H.llt().solve(Eigen::Map<const VectorXd>(ne.gradient().data(), layout.dimension()));
+    EXPECT_LT((Eigen::Map<const VectorXd>(dx.data(), dx.size()) - xd).norm(),
+              1e-9 * (1.0 + xd.norm()));
     for (double& v : dx) v = -v;  // g = Jᵀr, step = −H⁻¹g
     p.values.retractAll(layout.slotOffset(), dx.data());
     const double now = ne.cost(p.graph, p.values).chi2;
@@ -450,7 +454,8 @@ TEST_P(LinearTest, FactorizeReportsIndefinite) {
     chol.analyze(layout.dimension(), layout.columnStart(), layout.rowIndex());
     std::vector<double> bad = ne.hessian();
     const int mid = layout.dimension() / 2;
-    bad[layout.diagonalPositions()[mid]] = -1e3 * (1.0 + std::abs(bad[layout.diagonalPositions()[mid]]));
+    bad[layout.diagonalPositions()[mid]] =
+        -1e3 * (1.0 + std::abs(bad[layout.diagonalPositions()[mid]]));
     EXPECT_FALSE(chol.factorize(bad)) << "kind " << static_cast<int>(kind);
     // Recovers with a good matrix on the same analysis.
     EXPECT_TRUE(chol.factorize(ne.hessian())) << "kind " << static_cast<int>(kind);
