@@ -100,13 +100,11 @@ inline Schedule buildSchedule(const io::Dataset& ds, int robotsWanted, bool inte
   s.is3d = ds.is3d;
   s.robots = feed.robots();
   s.steps.resize(order.size());
-  std::vector<bool> started(static_cast<size_t>(feed.robots()), false);
   for (size_t i = 0; i < order.size(); ++i) {
     const int r = feed.robotOf(order[i]);
     s.steps[i].robot = r + robotOffset;
     s.steps[i].id = order[i];
-    s.steps[i].first = !started[static_cast<size_t>(r)];
-    started[static_cast<size_t>(r)] = true;
+    s.steps[i].first = feed.startsItsRobot(i);
   }
   for (const auto& e : ds.edges) {
     const long at = feed.dueAt(e);

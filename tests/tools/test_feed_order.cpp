@@ -49,6 +49,20 @@ TEST(FeedOrder, SegmentsOneAfterTheOtherOrRoundRobin) {
   EXPECT_EQ(FeedOrder(ds, -1, 50, false).robots(), 6);  // never more robots than poses
 }
 
+TEST(FeedOrder, EachRobotStartsAtItsFirstPoseInFeedOrder) {
+  const io::Dataset ds = sixPoses();
+  auto starts = [](const FeedOrder& f) {
+    std::vector<bool> s;
+    for (size_t i = 0; i < f.poses().size(); ++i) s.push_back(f.startsItsRobot(i));
+    return s;
+  };
+  EXPECT_EQ(starts(FeedOrder(ds, -1, 2, false)), (std::vector<bool>{1, 0, 0, 1, 0, 0}));
+  EXPECT_EQ(starts(FeedOrder(ds, -1, 2, true)),
+            (std::vector<bool>{1, 1, 0, 0, 0, 0}));  // 0 3 1 4 2 5
+  EXPECT_EQ(starts(FeedOrder(ds, -1, 3, true)), (std::vector<bool>{1, 1, 1, 0, 0, 0}));
+  EXPECT_THROW(FeedOrder(ds, -1, 1, false).startsItsRobot(6), std::out_of_range);
+}
+
 TEST(FeedOrder, AnEdgeIsDueWithItsLastPose) {
   const io::Dataset ds = sixPoses();
   const FeedOrder mixed(ds, -1, 2, true);  // 0 3 1 4 2 5

@@ -28,7 +28,14 @@ FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool i
     for (size_t k = 0; order_.size() < n; ++k)
       for (size_t r = 0; r < robots; ++r)
         if (k < segment[r].size()) order_.push_back(segment[r][k]);
-  for (size_t i = 0; i < order_.size(); ++i) rank_[order_[i]] = static_cast<long>(i);
+  std::vector<bool> started(robots, false);
+  startsRobot_.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    rank_[order_[i]] = static_cast<long>(i);
+    const auto r = static_cast<size_t>(robotOf_[order_[i]]);
+    startsRobot_[i] = !started[r];
+    started[r] = true;
+  }
 }
 
 long FeedOrder::dueAt(const io::Edge& e) const {

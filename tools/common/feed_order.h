@@ -22,6 +22,8 @@ class FeedOrder {
   int robots() const { return robots_; }
   /// 0-based robot of a fed pose.
   int robotOf(std::int64_t pose) const { return robotOf_.at(pose); }
+  /// Whether poses()[step] is its robot's first in feed order (it carries the initial value).
+  bool startsItsRobot(size_t step) const { return startsRobot_.at(step); }
   /// The step (index into poses()) an edge is due at: its last end's, a sighting's pose's;
   /// -1 when an end is not fed.
   long dueAt(const io::Edge& e) const;
@@ -33,6 +35,7 @@ class FeedOrder {
   int robots_ = 1;
   std::unordered_map<std::int64_t, int> robotOf_;
   std::unordered_map<std::int64_t, long> rank_;
+  std::vector<bool> startsRobot_;
 };
 
 }  // namespace loopd::tools

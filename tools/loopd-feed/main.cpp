@@ -174,7 +174,6 @@ int run(const Options& o) {
   for (size_t r = 0; r < robots; ++r)
     pubs.push_back(std::make_unique<client::FactorPublisher>(sink, o.sender + std::to_string(r),
                                                              o.prefix + "FACTORS"));
-  std::vector<bool> started(robots, false);
 
   const auto t0 = std::chrono::steady_clock::now();
   const std::int64_t stepUs = o.rate > 0 ? static_cast<std::int64_t>(1e6 / o.rate) : 1000;
@@ -182,8 +181,7 @@ int run(const Options& o) {
     const std::int64_t id = order[i];
     const int r = feed.robotOf(id);
     client::FactorPublisher& pub = *pubs[static_cast<size_t>(r)];
-    if (!started[static_cast<size_t>(r)]) {
-      started[static_cast<size_t>(r)] = true;
+    if (feed.startsItsRobot(i)) {
       if (ds.is3d)
         pub.initialValue(KeyRef::pose(r, id), client::Pose3{});
       else
