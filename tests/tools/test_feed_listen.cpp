@@ -89,6 +89,9 @@ TEST(LoopdFeed, BadCommandLines) {
   EXPECT_EQ(runTool({kFeed, "/nonexistent.g2o", "--log", tmp("x.lcmlog")}, tmp("f.log")), 1);
   EXPECT_EQ(runTool({kListen}, tmp("l.log")), 2);
   EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-batches", "0"}, tmp("l.log")), 2);
+  EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-batches", "-1"}, tmp("l.log")), 2);
+  EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-quiet", "-1"}, tmp("l.log")), 2);
+  EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-quiet", "nan"}, tmp("l.log")), 2);
   EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-batches", "many"}, tmp("l.log")), 2);
 }
 

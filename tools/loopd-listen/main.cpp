@@ -65,20 +65,19 @@ int main(int argc, char** argv) {
         out = val();
       else if (a == "--covariances")
         cov = val();
-      else if (a == "--until-quiet")
+      else if (a == "--until-quiet") {
         quietSeconds = std::stod(val());
-      else if (a == "--until-batches")
+        if (!std::isfinite(quietSeconds) || quietSeconds < 0)
+          throw std::invalid_argument("--until-quiet must be a number of seconds >= 0");
+      } else if (a == "--until-batches") {
         untilBatches = std::stoll(val());
-      else if (a == "--quiet")
+        if (untilBatches <= 0) throw std::invalid_argument("--until-batches must be positive");
+      } else if (a == "--quiet")
         quiet = true;
       else
         throw std::invalid_argument("unknown argument " + a);
     }
     if (out.empty()) throw std::invalid_argument("--out is required");
-    if (!std::isfinite(quietSeconds))
-      throw std::invalid_argument("--until-quiet must be a finite number of seconds");
-    if (untilBatches == 0 || untilBatches < -1)
-      throw std::invalid_argument("--until-batches must be positive");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "loopd-listen: %s\n\n%s", e.what(), kUsage);
     return 2;
