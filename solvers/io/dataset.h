@@ -42,9 +42,8 @@ struct Edge {
   std::int64_t from = 0;  // a pose id
   std::int64_t to = 0;    // a pose id, or a landmark id for PosePoint*/BearingRange2
   std::array<double, 7> measurement{};
-  Eigen::Matrix<double, 6, 6> information =
-      Eigen::Matrix<double, 6, 6>::Zero();  // full
-                                            // symmetric, top-left dim×dim used
+  // Full symmetric; the top-left dim×dim block is used.
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
   int line = 0;
   /// The 0-based index of this edge among the file's edges (the `rejected` numbering).
   int index = 0;

@@ -39,9 +39,9 @@ std::atomic<bool> g_stop{false};
 extern "C" void onSignal(int) { g_stop = true; }
 
 const char* kUsage =
-    "usage: loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o [--covariances "
-    "COV.txt]\n"
-    "                    [--until-quiet SECONDS] [--until-batches N] [--quiet]\n";
+    "usage: loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o\n"
+    "                    [--covariances COV.txt] [--until-quiet SECONDS] [--until-batches N]\n"
+    "                    [--quiet]\n";
 
 }  // namespace
 

@@ -14,9 +14,9 @@ struct SolveOptions {
   int maxIterations = 100;
   bool quiet = false;
   bool linearInit = true;  // --init linear|file
+  // --robust-parameter X (BackendOptions::robustParameter; 0 = default)
   double robustParameter = 0.0;
-  int maxHypotheses = 10;  // --max-hypotheses K (mh)  // --robust-parameter X
-                           // (BackendOptions::robustParameter; 0 = default)
+  int maxHypotheses = 10;  // --max-hypotheses K (mh)
 };
 
 /// Parses argv; on --help prints usage and exits 0; on a bad command line throws
