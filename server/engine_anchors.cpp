@@ -1,0 +1,156 @@
+// Multi-robot anchors (engine.h): the robots' root priors, joining two robot groups through
+// an inter-robot factor, regrouping after removals, and poses in the common frame.
+#include "server/engine.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <functional>
+
+#include "server/wire_factors.h"
+#include "solvers/factors/between_factor_se2.h"
+#include "solvers/factors/between_factor_se3.h"
+#include "solvers/factors/prior_factors.h"
+
+namespace loopd::server {
+
+FactorPtr Engine::priorAt(Key k, const Values& from, int slot, double information) {
+  std::shared_ptr<Factor> f;
+  if (from.type(slot) == VarType::SE3)
+    f = std::make_shared<PriorFactorSE3>(k, from.se3(slot), Mat6::Identity() * information);
+  else
+    f = std::make_shared<PriorFactorSE2>(k, from.se2(slot),
+                                         Eigen::Matrix3d::Identity() * information);
+  f->setId(newFactorId());
+  return f;
+}
+
+void Engine::joinRobots(std::uint32_t r, std::uint32_t s, Key xr, Key xs, const Factor& between,
+                        const Values& vals, Staged& st) {
+  RobotInfo& R = robots_.at(r);
+  RobotInfo& S = robots_.at(s);
+  BackendUpdate& u = st.update;
+  const bool se3 = R.poseType == VarType::SE3;
+  auto addFactor = [&](FactorPtr f) {
+    u.factors.push_back(std::move(f));
+    st.owners.push_back({"", -1, false});
+  };
+  auto anchorValue = [&](Key a, Values& into) {
+    const Values* h = u.initial.contains(a) ? &u.initial : holder(a);
+    into.insertFrom(*h, h->slot(a));
+  };
+  auto insertAnchor = [&](Key a, const SE2& v2, const SE3& v3, double info) -> FactorId {
+    Values one;
+    if (se3)
+      one.insert(a, v3);
+    else
+      one.insert(a, v2);
+    u.initial.insertFrom(one, 0);
+    stagedValues_.insertFrom(one, 0);
+    if (info <= 0.0) return FactorId{0};
+    FactorPtr p = priorAt(a, one, 0, info);
+    const FactorId id = p->id();
+    addFactor(std::move(p));
+    return id;
+  };
+  if (!R.anchored && !S.anchored) {
+    R.anchorPrior = insertAnchor(anchorKey(r), SE2(), SE3(), opt_.priorInformation);
+    R.anchored = true;
+    R.parent = r;
+    spdlog::info("robot {} anchors a common frame", r);
+  }
+  if (R.anchored != S.anchored) {
+    // The newcomer's anchor, from the factor: A_s = A_r·x_r·Z·x_s⁻¹ (or the reverse).
+    const bool newIsS = !S.anchored;
+    const std::uint32_t n = newIsS ? s : r, o = newIsS ? r : s;
+    Values av;
+    anchorValue(anchorKey(o), av);
+    SE2 a2;
+    SE3 a3;
+    if (se3) {
+      const SE3 Z = static_cast<const BetweenFactorSE3&>(between).measured();
+      const SE3 Ao = av.se3(0);
+      a3 = newIsS ? Ao * se3Of(vals, xr) * Z * se3Of(vals, xs).inverse()
+                  : Ao * se3Of(vals, xs) * Z.inverse() * se3Of(vals, xr).inverse();
+    } else {
+      const SE2 Z = static_cast<const BetweenFactorSE2&>(between).measured();
+      const SE2 Ao = av.se2(0);
+      a2 = newIsS ? Ao * se2Of(vals, xr) * Z * se2Of(vals, xs).inverse()
+                  : Ao * se2Of(vals, xs) * Z.inverse() * se2Of(vals, xr).inverse();
+    }
+    RobotInfo& N = robots_.at(n);
+    N.anchorPrior = insertAnchor(anchorKey(n), a2, a3, 0.0);  // the factor determines it
+    N.anchored = true;
+    N.parent = root(o);
+    spdlog::info("robot {} joins robot {}'s frame", n, root(o));
+    return;
+  }
+  const std::uint32_t rr = root(r), rs = root(s);
+  if (rr == rs) return;
+  // Two anchored groups: s's group root loses its strong prior (a negligible one keeps it
+  // well posed) and the group follows the factor.
+  RobotInfo& RS = robots_.at(rs);
+  if (RS.anchorPrior != 0) u.removals.push_back(RS.anchorPrior);
+  RS.anchorPrior = 0;
+  RS.parent = rr;
+  spdlog::info("robot group of {} merges into robot {}'s frame", rs, rr);
+}
+
+void Engine::regroup(std::vector<Key>& moved) {
+  // Inter-robot factors were removed: recompute the groups of joined robots from the live ones;
+  // a group left without a root prior gets one (at its current value) on its lowest robot.
+  regroupNeeded_ = false;
+  std::map<std::uint32_t, std::uint32_t> parent;
+  std::function<std::uint32_t(std::uint32_t)> find = [&](std::uint32_t r) {
+    while (parent[r] != r) r = parent[r] = parent[parent[r]];
+    return r;
+  };
+  for (auto& [r, info] : robots_)
+    if (info.anchored) parent[r] = r;
+  for (const auto& [id, e] : interEdges_) {
+    const std::uint32_t a = find(e.first), b = find(e.second);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  }
+  std::map<std::uint32_t, bool> hasRootPrior;
+  for (auto& [r, p] : parent) hasRootPrior[find(r)] |= robots_.at(r).anchorPrior != 0;
+  BackendUpdate u;
+  for (auto& [r, p] : parent) {
+    const std::uint32_t g = find(r);
+    robots_.at(r).parent = g;
+    if (g == r && !hasRootPrior[g]) {
+      const Values& est = backend_->estimate();
+      FactorPtr prior = priorAt(anchorKey(r), est, est.slot(anchorKey(r)), opt_.priorInformation);
+      robots_.at(r).anchorPrior = prior->id();
+      u.factors.push_back(prior);
+      spdlog::info("robot {} roots a group again (inter-robot factors removed)", r);
+    }
+  }
+  if (u.factors.empty()) return;
+  try {
+    for (Key k : backend_->update(u).moved) moved.push_back(k);
+    for (const auto& f : u.factors) live_[f->id()] = f;
+  } catch (const std::exception& e) {
+    spdlog::error("re-anchoring failed: {}", e.what());
+  }
+}
+
+bool Engine::commonFramePose(Key k, std::vector<double>& out) const {
+  const Values& est = backend_->estimate();
+  const int s = est.slot(k);
+  if (s < 0) return false;
+  const std::uint32_t r = keyRobot(k);
+  const bool anchored = robotJoined(r) && est.contains(anchorKey(r));
+  if (est.type(s) == VarType::SE2) {
+    const SE2 x = anchored ? se2Of(est, anchorKey(r)) * est.se2(s) : est.se2(s);
+    out = {x.x, x.y, x.theta};
+  } else if (est.type(s) == VarType::SE3) {
+    const SE3 x = anchored ? se3Of(est, anchorKey(r)) * est.se3(s) : est.se3(s);
+    out.assign(7, 0.0);
+    x.toTranslationQuaternion(out.data());
+  } else {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace loopd::server

@@ -1,0 +1,103 @@
+#include "server/wire_factors.h"
+
+#include <stdexcept>
+
+#include "server/anchored_between_factor.h"
+#include "server/wire.h"
+#include "solvers/factors/landmark_factors.h"
+#include "solvers/factors/prior_factors.h"
+
+namespace loopd::server {
+
+using W = loopd::factor_t;
+
+namespace {
+
+FactorRole roleOf(int role) {
+  switch (role) {
+    case W::ROLE_PRIOR:
+      return FactorRole::Prior;
+    case W::ROLE_ODOMETRY:
+      return FactorRole::Odometry;
+    case W::ROLE_LANDMARK:
+      return FactorRole::Landmark;
+    default:
+      return FactorRole::LoopClosure;
+  }
+}
+
+}  // namespace
+
+Key anchorKey(std::uint32_t robot) { return makeKey(robot, KeyKind::Anchor, 0); }
+
+SE2 se2Of(const Values& v, Key k) { return v.se2(v.slot(k)); }
+SE3 se3Of(const Values& v, Key k) { return v.se3(v.slot(k)); }
+
+SE3 se3From(const std::vector<double>& m) { return SE3::fromTranslationQuaternion(m.data()); }
+
+std::shared_ptr<Factor> buildFactor(const W& f) {
+  const Eigen::MatrixXd info = informationOf(f);
+  const Key a = toKey(f.keys[0]);
+  const Key b = f.num_keys > 1 ? toKey(f.keys[1]) : 0;
+  const auto& m = f.measurement;
+  const FactorRole role = roleOf(f.role);
+  std::shared_ptr<Factor> out;
+  switch (f.type) {
+    case W::PRIOR_SE2:
+      out = std::make_shared<PriorFactorSE2>(a, SE2(m[0], m[1], m[2]), Eigen::Matrix3d(info));
+      break;
+    case W::PRIOR_SE3:
+      out = std::make_shared<PriorFactorSE3>(a, se3From(m), Mat6(info));
+      break;
+    case W::PRIOR_POINT2:
+      out = std::make_shared<PriorFactorPoint2>(a, Vec2(m[0], m[1]), Eigen::Matrix2d(info));
+      break;
+    case W::PRIOR_POINT3:
+      out = std::make_shared<PriorFactorPoint3>(a, Vec3(m[0], m[1], m[2]), Mat3(info));
+      break;
+    case W::BETWEEN_SE2:
+      out = std::make_shared<BetweenFactorSE2>(a, b, SE2(m[0], m[1], m[2]), Eigen::Matrix3d(info),
+                                               role);
+      break;
+    case W::BETWEEN_SE3:
+      out = std::make_shared<BetweenFactorSE3>(a, b, se3From(m), Mat6(info), role);
+      break;
+    case W::POSE_POINT2:
+      out = std::make_shared<PosePointFactor2>(a, b, Vec2(m[0], m[1]), Eigen::Matrix2d(info), role);
+      break;
+    case W::POSE_POINT3:
+      out = std::make_shared<PosePointFactor3>(a, b, Vec3(m[0], m[1], m[2]), Mat3(info), role);
+      break;
+    case W::BEARING_RANGE2:
+      out = std::make_shared<BearingRangeFactor2>(a, b, Vec2(m[0], m[1]), Eigen::Matrix2d(info),
+                                                  role);
+      break;
+    default:
+      throw std::invalid_argument("unknown factor type");
+  }
+  out->setRole(role);
+  return out;
+}
+
+bool isInterRobot(const W& f) {
+  return (f.type == W::BETWEEN_SE2 || f.type == W::BETWEEN_SE3) &&
+         f.keys[0].robot != f.keys[1].robot;
+}
+
+std::shared_ptr<Factor> anchoredFactor(const W& wf, const Factor& built) {
+  const Key xr = toKey(wf.keys[0]), xs = toKey(wf.keys[1]);
+  const Key ar = anchorKey(keyRobot(xr)), as = anchorKey(keyRobot(xs));
+  const Eigen::MatrixXd info = informationOf(wf);
+  if (wf.type == W::BETWEEN_SE2) {
+    const auto& bf = static_cast<const BetweenFactorSE2&>(built);
+    return std::make_shared<AnchoredBetweenFactorSE2>(
+        ar, xr, as, xs, bf.measured(), Eigen::Matrix3d(info), FactorRole::LoopClosure);
+  }
+  const auto& bf = static_cast<const BetweenFactorSE3&>(built);
+  return std::make_shared<AnchoredBetweenFactorSE3>(ar, xr, as, xs, bf.measured(), Mat6(info),
+                                                    FactorRole::LoopClosure);
+}
+
+bool isAnchored(const Factor& f) { return f.size() == 4; }
+
+}  // namespace loopd::server

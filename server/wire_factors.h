@@ -1,0 +1,31 @@
+#pragma once
+// The engine's wire → solver factors: a validated factor_t as a solver factor, an inter-robot
+// one through the robots' anchors (engine.h), and the anchor keys and poses they use.
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "loopd/factor_t.hpp"
+#include "solvers/core/values.h"
+#include "solvers/factors/factor.h"
+
+namespace loopd::server {
+
+/// Robot r's anchor A_r: places r's frame in the common one.
+Key anchorKey(std::uint32_t robot);
+/// The pose at key k of v (k must be there).
+SE2 se2Of(const Values& v, Key k);
+SE3 se3Of(const Values& v, Key k);
+/// An SE3 from the wire's seven numbers (translation, then quaternion).
+SE3 se3From(const std::vector<double>& m);
+/// A validated wire factor as a solver factor on its own keys (intra-robot form).
+std::shared_ptr<Factor> buildFactor(const loopd::factor_t& f);
+/// A between factor whose two keys belong to different robots.
+bool isInterRobot(const loopd::factor_t& f);
+/// An inter-robot between factor (`built` = its intra-robot form) evaluated through the robots'
+/// anchors: keys A_r, x_r, A_s, x_s. The anchors must exist (Engine::joinRobots).
+std::shared_ptr<Factor> anchoredFactor(const loopd::factor_t& wf, const Factor& built);
+/// An anchored (inter-robot) factor: the robots it joins are recorded as inter-robot edges.
+bool isAnchored(const Factor& f);
+
+}  // namespace loopd::server

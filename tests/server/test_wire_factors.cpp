@@ -1,0 +1,124 @@
+// The engine's wire → solver factors: types, roles, measurements and information carried over;
+// inter-robot factors through the robots' anchors.
+#include "server/wire_factors.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <stdexcept>
+
+#include "client/factor_publisher.h"
+#include "server/anchored_between_factor.h"
+#include "server/wire.h"
+#include "solvers/factors/between_factor_se2.h"
+
+using namespace loopd;
+using namespace loopd::server;
+using client::KeyRef;
+
+namespace {
+
+factor_t wireBetween2(int ra, std::int64_t a, int rb, std::int64_t b, double x, double y,
+                      double theta, std::int8_t role) {
+  factor_t f{};
+  f.id = 7;
+  f.type = factor_t::BETWEEN_SE2;
+  f.role = role;
+  f.keys = {client::wireKey(KeyRef::pose(ra, a)), client::wireKey(KeyRef::pose(rb, b))};
+  f.num_keys = 2;
+  f.measurement = {x, y, theta};
+  f.num_measurement = 3;
+  f.noise_kind = factor_t::NOISE_INFORMATION;
+  f.noise = {100, 0, 0, 200, 0, 1000};  // upper triangle, row-major
+  f.num_noise = 6;
+  return f;
+}
+
+}  // namespace
+
+TEST(WireFactors, BetweenSE2KeepsKeysRoleMeasurementAndInformation) {
+  const factor_t w = wireBetween2(0, 3, 0, 9, 1.0, -2.0, 0.5, factor_t::ROLE_LOOP_CLOSURE);
+  const std::shared_ptr<Factor> f = buildFactor(w);
+  ASSERT_EQ(f->size(), 2);
+  EXPECT_EQ(f->key(0), toKey(w.keys[0]));
+  EXPECT_EQ(f->key(1), toKey(w.keys[1]));
+  EXPECT_EQ(f->role(), FactorRole::LoopClosure);
+  const auto& b = dynamic_cast<const BetweenFactorSE2&>(*f);
+  EXPECT_DOUBLE_EQ(b.measured().x, 1.0);
+  EXPECT_DOUBLE_EQ(b.measured().y, -2.0);
+  EXPECT_DOUBLE_EQ(b.measured().theta, 0.5);
+  EXPECT_DOUBLE_EQ(b.information()(1, 1), 200.0);
+  EXPECT_DOUBLE_EQ(b.information()(2, 2), 1000.0);
+  EXPECT_FALSE(isInterRobot(w));
+  EXPECT_FALSE(isAnchored(*f));
+
+  // A pose pair at exactly the measurement costs nothing; 0.1 rad off costs 1000·0.1².
+  Values v;
+  v.insert(f->key(0), SE2(0, 0, 0));
+  v.insert(f->key(1), SE2(1.0, -2.0, 0.5));
+  EXPECT_NEAR(f->chi2(v), 0.0, 1e-12);
+  v.set(v.slot(f->key(1)), SE2(1.0, -2.0, 0.6));
+  EXPECT_NEAR(f->chi2(v), 10.0, 1e-9);
+}
+
+TEST(WireFactors, OdometryRoleAndPriorSE3FromTheWiresSevenNumbers) {
+  EXPECT_EQ(buildFactor(wireBetween2(0, 1, 0, 2, 1, 0, 0, factor_t::ROLE_ODOMETRY))->role(),
+            FactorRole::Odometry);
+  factor_t p{};
+  p.type = factor_t::PRIOR_SE3;
+  p.role = factor_t::ROLE_PRIOR;
+  p.keys = {client::wireKey(KeyRef::pose(2, 0))};
+  p.num_keys = 1;
+  const double s = std::sqrt(0.5);
+  p.measurement = {1, 2, 3, 0, 0, s, s};  // x y z, then qx qy qz qw: 90° about z
+  p.num_measurement = 7;
+  p.noise_kind = factor_t::NOISE_INFORMATION;
+  p.noise.assign(21, 0.0);
+  for (int i = 0, at = 0; i < 6; at += 6 - i, ++i) p.noise[at] = 1.0;  // the diagonal
+  p.num_noise = 21;
+  const std::shared_ptr<Factor> f = buildFactor(p);
+  EXPECT_EQ(f->role(), FactorRole::Prior);
+  const SE3 X = se3From(p.measurement);
+  double back[7];
+  X.toTranslationQuaternion(back);
+  for (int i = 0; i < 7; ++i) EXPECT_NEAR(back[i], p.measurement[i], 1e-12) << i;
+  Values v;
+  v.insert(f->key(0), X);
+  EXPECT_NEAR(f->chi2(v), 0.0, 1e-12);
+  EXPECT_NEAR(se3Of(v, f->key(0)).t.z(), 3.0, 1e-12);
+}
+
+TEST(WireFactors, UnknownTypeThrows) {
+  factor_t w = wireBetween2(0, 1, 0, 2, 1, 0, 0, factor_t::ROLE_ODOMETRY);
+  w.type = 42;
+  EXPECT_THROW(buildFactor(w), std::invalid_argument);
+}
+
+TEST(WireFactors, InterRobotBetweenGoesThroughBothAnchors) {
+  const factor_t w = wireBetween2(1, 4, 2, 6, 0.5, 0.25, -0.3, factor_t::ROLE_LOOP_CLOSURE);
+  EXPECT_TRUE(isInterRobot(w));
+  const std::shared_ptr<Factor> built = buildFactor(w);
+  const std::shared_ptr<Factor> a = anchoredFactor(w, *built);
+  ASSERT_EQ(a->size(), 4);
+  EXPECT_TRUE(isAnchored(*a));
+  EXPECT_EQ(a->role(), FactorRole::LoopClosure);
+  EXPECT_EQ(a->key(0), anchorKey(1));
+  EXPECT_EQ(a->key(1), toKey(w.keys[0]));
+  EXPECT_EQ(a->key(2), anchorKey(2));
+  EXPECT_EQ(a->key(3), toKey(w.keys[1]));
+  EXPECT_NE(anchorKey(1), anchorKey(2));
+
+  // With both anchors at the identity it is the plain between factor; moving robot 2's frame
+  // by A and its pose by A⁻¹ changes nothing.
+  const SE2 xr(1, 2, 0.3), xs(1.4, 2.5, 0.1), A(3, -1, 0.7);
+  Values plain, anchored;
+  plain.insert(built->key(0), xr);
+  plain.insert(built->key(1), xs);
+  anchored.insert(anchorKey(1), SE2());
+  anchored.insert(a->key(1), xr);
+  anchored.insert(anchorKey(2), A);
+  anchored.insert(a->key(3), A.inverse() * xs);
+  EXPECT_GT(built->chi2(plain), 0.0);
+  EXPECT_NEAR(a->chi2(anchored), built->chi2(plain), 1e-9);
+  EXPECT_NEAR(se2Of(anchored, anchorKey(2)).theta, 0.7, 1e-15);
+}
