@@ -21,18 +21,11 @@
 #include <unordered_set>
 
 #include "robust/decorator_backend.h"
-#include "robust/robust_factors.h"
+#include "robust/risam_sig_factor.h"
 
 namespace loopd {
 
-class RisamSigFactor;  // the SIG wrapper (risam_backend.cpp)
 class Isam2Backend;
-
-/// The SIG kernel's shape c applied to χ² scaled by chi2Scale.
-struct SigShape {
-  double c = 0.0, chi2Scale = 1.0;
-  double weight(double chi2, double mu) const { return sigWeight(chi2Scale * chi2, mu, c); }
-};
 
 struct RisamOptions {
   double shape = 0.0;  // c; ≤ 0: √χ²_dim(0.95) (BackendOptions::robustParameter overrides)
