@@ -108,8 +108,8 @@ TEST(WireFactors, InterRobotBetweenGoesThroughBothAnchors) {
   EXPECT_EQ(a->key(3), toKey(w.keys[1]));
   EXPECT_NE(anchorKey(1), anchorKey(2));
 
-  // With both anchors at the identity it is the plain between factor; moving robot 2's frame
-  // by A and its pose by A⁻¹ changes nothing.
+  // Robot 1's anchor at the identity, robot 2's frame moved by A and its pose by A⁻¹ (the same
+  // common-frame poses): the plain between factor's χ².
   const SE2 xr(1, 2, 0.3), xs(1.4, 2.5, 0.1), A(3, -1, 0.7);
   Values plain, anchored;
   plain.insert(built->key(0), xr);
