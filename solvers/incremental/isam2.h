@@ -105,30 +105,54 @@ class Isam2Backend : public Backend {
     bool alive = false;
   };
 
-  // --- bookkeeping
+  // The top of one recompute(), handed from step to step. Positions are elimination
+  // positions (scratchPos_ of a top variable while recompute() runs).
+  struct Top {
+    std::vector<int> vars;     // the variables to re-eliminate
+    std::vector<int> orphans;  // untouched children of detached cliques
+    std::vector<int> factors;  // factors entirely inside the top (the orphans' rows follow)
+    std::vector<int> ov;       // variable at each position
+    std::vector<int> homeStart, homeRows;     // rows by home (first-eliminated) position
+    std::vector<std::vector<int>> structure;  // later positions in each position's column
+    std::vector<int> etParent;                // elimination-tree parent position, −1 at a root
+    std::vector<int> created;                 // new cliques, each parent before its children
+  };
+
+  // --- bookkeeping (isam2.cpp)
   int addVariable(const Values& from, int slot);
   int addFactor(const FactorPtr& f);
   void removeFactor(int index);
   void markAffected(int v);
   void manageGauge();
   void relinearize(bool all);
-  int newClique();
-  void freeClique(int c);
-
-  // --- elimination and solve
-  /// Re-eliminates the top formed by affected_ (constrained_ ordered last).
-  void recompute();
+  double deltaMax(int v) const;
   /// Every variable relinearized at the current estimate (Δ = 0) and the tree recomputed.
   void relinearizeAllAtEstimate();
+
+  // --- re-elimination of the top (isam2_recompute.cpp)
+  /// Re-eliminates the top formed by affected_ (constrained_ ordered last).
+  void recompute();
+  /// Lists the top (affected cliques and their ancestors) and frees its cliques.
+  void detachTop(Top& top);
+  void collectTopFactors(Top& top);
+  /// Fills top.ov and the variables' positions (scratchPos_).
+  void orderTop(Top& top);
+  void symbolicEliminate(Top& top);
+  /// New cliques from the elimination tree, orphans re-attached, new roots recorded.
+  void buildCliques(Top& top);
+  void eliminateCliques(const Top& top);
+
+  // --- clique storage, numerics and back-substitution (isam2_cliques.cpp)
+  int newClique();
+  void freeClique(int c);
   bool factorizeClique(Clique& C);
   void linearizeInto(int factor, Clique& C);
   void accumulateChild(const Clique& child, Clique& C);
   void backSubstitute(std::vector<Key>* moved);
   /// Solves C's frontal Δ; true if one moved by more than α.
   bool solveClique(const Clique& C, std::vector<Key>* moved);
-  double deltaMax(int v) const;
 
-  // --- marginals
+  // --- marginals (isam2_marginals.cpp)
   const double* cliqueMarginal(int c);
   void computeCliqueMarginal(int c);
   int varIndex(Key k) const;
