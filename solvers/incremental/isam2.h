@@ -111,7 +111,10 @@ class Isam2Backend : public Backend {
     std::vector<int> vars;     // the variables to re-eliminate
     std::vector<int> orphans;  // untouched children of detached cliques
     std::vector<int> factors;  // factors entirely inside the top (the orphans' rows follow)
-    std::vector<int> ov;       // variable at each position
+    // Each row's columns (indices into vars): the factors' variables, then each orphan's
+    // separator; read by the ordering and by the symbolic elimination.
+    std::vector<int> rowPtr, rowCol;
+    std::vector<int> ov;                      // variable at each position
     std::vector<int> homeStart, homeRows;     // rows by home (first-eliminated) position
     std::vector<std::vector<int>> structure;  // later positions in each position's column
     std::vector<int> etParent;                // elimination-tree parent position, −1 at a root

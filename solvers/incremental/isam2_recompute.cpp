@@ -13,12 +13,13 @@ namespace loopd {
 
 namespace {
 
-// The top's rows (its factors, then the orphans' separator factors) as lists of columns
-// (indices in Top::vars), the columns' start in CCOLAMD's input, and CCOLAMD's workspace.
+// The top's rows as lists of columns (Top::rowPtr, rowCol), the columns' start in CCOLAMD's
+// input, and CCOLAMD's workspace.
 struct TopPattern {
   int nrow = 0, ncol = 0;
-  std::vector<int> rowPtr, rowCol, colPtr;
-  std::vector<int> A, p;
+  const std::vector<int>& rowPtr;
+  const std::vector<int>& rowCol;
+  std::vector<int> colPtr, A, p;
 };
 
 // CCOLAMD with constraint groups (null: unconstrained); false if it failed.
@@ -144,7 +145,8 @@ void Isam2Backend::detachTop(Top& top) {
   stats_.orphans = static_cast<int>(top.orphans.size());
 }
 
-// 2. The rows of the top: factors entirely inside it, and the orphans' separator factors.
+// 2. The rows of the top: factors entirely inside it, and the orphans' separator factors,
+//    each as its columns (positions in top.vars, which scratchPos_ holds until orderTop).
 void Isam2Backend::collectTopFactors(Top& top) {
   for (int v : top.vars)
     for (int f : varFactors_[v]) {
@@ -155,6 +157,21 @@ void Isam2Backend::collectTopFactors(Top& top) {
         inside = scratchPos_[factorVars_[f][k]] >= 0;
       if (inside) top.factors.push_back(f);
     }
+  const size_t nrow = top.factors.size() + top.orphans.size();
+  top.rowPtr.assign(nrow + 1, 0);
+  top.rowCol.reserve(nrow * 3);
+  for (size_t r = 0; r < top.factors.size(); ++r) {
+    const int f = top.factors[r];
+    for (int k = 0; k < factors_[f]->size(); ++k)
+      top.rowCol.push_back(scratchPos_[factorVars_[f][k]]);
+    top.rowPtr[r + 1] = static_cast<int>(top.rowCol.size());
+  }
+  for (size_t o = 0; o < top.orphans.size(); ++o) {
+    const Clique& O = cliques_[top.orphans[o]];
+    for (size_t i = O.numFrontals; i < O.vars.size(); ++i)
+      top.rowCol.push_back(scratchPos_[O.vars[i]]);
+    top.rowPtr[top.factors.size() + o + 1] = static_cast<int>(top.rowCol.size());
+  }
 }
 
 // 3. Constrained ordering (CCOLAMD): variables of the new factors last.
@@ -168,25 +185,8 @@ void Isam2Backend::orderTop(Top& top) {
       for (int i = 0; i < m; ++i)
         if ((constrainedStamp_[topVars[i]] == epoch_) == (pass == 1)) order[next++] = i;
   } else {
-    // The top's rows (its factors and the orphans' separator factors) as lists of columns.
-    TopPattern t;
-    const int nrow = static_cast<int>(top.factors.size() + top.orphans.size());
-    t.nrow = nrow;
-    t.ncol = m;
-    t.rowPtr.assign(nrow + 1, 0);
-    t.rowCol.reserve(static_cast<size_t>(nrow) * 3);
-    for (int r = 0; r < static_cast<int>(top.factors.size()); ++r) {
-      const int f = top.factors[r];
-      for (int k = 0; k < factors_[f]->size(); ++k)
-        t.rowCol.push_back(scratchPos_[factorVars_[f][k]]);
-      t.rowPtr[r + 1] = static_cast<int>(t.rowCol.size());
-    }
-    for (size_t o = 0; o < top.orphans.size(); ++o) {
-      const Clique& O = cliques_[top.orphans[o]];
-      for (size_t i = O.numFrontals; i < O.vars.size(); ++i)
-        t.rowCol.push_back(scratchPos_[O.vars[i]]);
-      t.rowPtr[top.factors.size() + o + 1] = static_cast<int>(t.rowCol.size());
-    }
+    const int nrow = static_cast<int>(top.rowPtr.size()) - 1;
+    TopPattern t{nrow, m, top.rowPtr, top.rowCol, {}, {}, {}};
     const int nnz = static_cast<int>(t.rowCol.size());
     t.colPtr.assign(m + 1, 0);
     for (int c : t.rowCol) ++t.colPtr[c + 1];
@@ -198,7 +198,8 @@ void Isam2Backend::orderTop(Top& top) {
     // that many updates first, so they sink below the part of the tree that updates keep
     // visiting instead of staying on its path to the root — kept only if it costs little
     // more fill than the plain order.
-    std::vector<int> cmember(m, 0);
+    // grouped: 2 constrained, 0 old, 1 recent (the recency constraint's groups).
+    std::vector<int> cmember(m, 0), grouped(m, 1);
     bool anyConstrained = false, allConstrained = true, anyRecent = false;
     int numOld = 0;
     for (int i = 0; i < m; ++i) {
@@ -206,12 +207,13 @@ void Isam2Backend::orderTop(Top& top) {
       cmember[i] = c ? 1 : 0;
       anyConstrained |= c;
       allConstrained &= c;
-      if (!c) {
-        const bool old = updateCount_ - touched_[topVars[i]] > isam_.recencyGrouping;
-        if (old)
-          ++numOld;
-        else
-          anyRecent = true;
+      if (c) {
+        grouped[i] = 2;
+      } else if (updateCount_ - touched_[topVars[i]] > isam_.recencyGrouping) {
+        grouped[i] = 0;
+        ++numOld;
+      } else {
+        anyRecent = true;
       }
     }
     const bool twoGroups = anyConstrained && !allConstrained;
@@ -220,10 +222,7 @@ void Isam2Backend::orderTop(Top& top) {
     // closures keep returning everywhere (city10000) the constraint buys nothing and its
     // extra fill costs time.
     if (ok && isam_.recencyGrouping > 0 && anyRecent && 4 * numOld >= m) {
-      std::vector<int> grouped(m, 0), alt;
-      for (int i = 0; i < m; ++i)
-        grouped[i] =
-            cmember[i] ? 2 : (updateCount_ - touched_[topVars[i]] > isam_.recencyGrouping ? 0 : 1);
+      std::vector<int> alt;
       if (!anyConstrained)
         for (int& g : grouped) g = std::min(g, 1);
       if (runCcolamd(t, grouped.data(), alt) &&
@@ -246,19 +245,15 @@ void Isam2Backend::symbolicEliminate(Top& top) {
   std::vector<int>& homeStart = top.homeStart;
   std::vector<int>& homeRows = top.homeRows;
   homeStart.assign(m + 1, 0);
-  const int nf = static_cast<int>(top.factors.size());
-  const int nrows = nf + static_cast<int>(top.orphans.size());
+  const int nrows = static_cast<int>(top.rowPtr.size()) - 1;
+  // A row's columns index top.vars; their positions in the order:
+  std::vector<int> posOfColumn(m);
+  for (int c = 0; c < m; ++c) posOfColumn[c] = scratchPos_[top.vars[c]];
   std::vector<int> rowHome(nrows);
   for (int r = 0; r < nrows; ++r) {
     int h = m;
-    if (r < nf) {
-      const int f = top.factors[r];
-      for (int k = 0; k < factors_[f]->size(); ++k) h = std::min(h, scratchPos_[factorVars_[f][k]]);
-    } else {
-      const Clique& O = cliques_[top.orphans[r - nf]];
-      for (size_t i = O.numFrontals; i < O.vars.size(); ++i)
-        h = std::min(h, scratchPos_[O.vars[i]]);
-    }
+    for (int i = top.rowPtr[r]; i < top.rowPtr[r + 1]; ++i)
+      h = std::min(h, posOfColumn[top.rowCol[i]]);
     rowHome[r] = h;
     ++homeStart[h + 1];
   }
@@ -283,13 +278,7 @@ void Isam2Backend::symbolicEliminate(Top& top) {
     };
     for (int i = homeStart[k]; i < homeStart[k + 1]; ++i) {
       const int r = homeRows[i];
-      if (r < nf) {
-        const int f = top.factors[r];
-        for (int j = 0; j < factors_[f]->size(); ++j) add(scratchPos_[factorVars_[f][j]]);
-      } else {
-        const Clique& O = cliques_[top.orphans[r - nf]];
-        for (size_t j = O.numFrontals; j < O.vars.size(); ++j) add(scratchPos_[O.vars[j]]);
-      }
+      for (int j = top.rowPtr[r]; j < top.rowPtr[r + 1]; ++j) add(posOfColumn[top.rowCol[j]]);
     }
     for (int c = childHead[k]; c >= 0; c = childNext[c])
       for (int q : structure[c]) add(q);
