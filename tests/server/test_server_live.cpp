@@ -86,7 +86,12 @@ TEST(ServerLive, FourRobotCity10000EndsInOneFrameAtTheOptimum) {
   Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-batches", "10000"},
                             tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  ASSERT_EQ(runTool({kFeed, data, "--robots", "4", "--lcm-url", url}, tmp("feed.log")), 0);
+  // Paced: unpaced, the 10000 batches leave in 0.08 s. In the twenty-second session's CI (a
+  // headless browser starting in the other `ctest -j 2` slot) the server's log stopped after
+  // the robots joined and it never reported 10000 handled: most likely a burst udpm dropped.
+  ASSERT_EQ(
+      runTool({kFeed, data, "--robots", "4", "--rate", "4000", "--lcm-url", url}, tmp("feed.log")),
+      0);
   ASSERT_EQ(listen.wait(180 * kSlowdown), 0) << listen.output();
   srv.kill(SIGTERM);
   EXPECT_EQ(srv.wait(30), 0) << srv.output();
