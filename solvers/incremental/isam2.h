@@ -84,23 +84,25 @@ class Isam2Backend : public Backend {
   bool isInRootClique(Key key) const;
 
  private:
-  struct Clique {
-    int parent = -1;
-    std::vector<int> children;
-    std::vector<int> vars;     // frontal variables (elimination order), then separator
-    std::vector<int> offsets;  // local scalar offset of vars[i]; size vars.size() + 1
+  // Aligned to a cache line, the fields the wildfire reads of every clique it visits first
+  // (numFrontals, createdStamp, vars, m's pointer): a clique it only checks costs one line.
+  struct alignas(64) Clique {
     int numFrontals = 0;
     int nf = 0;  // frontal scalar dimension
     int n = 0;   // total scalar dimension
+    int parent = -1;
+    long createdStamp = -1;
+    std::vector<int> vars;  // frontal variables (elimination order), then separator
     // n×n column-major, then n entries: top-left L_FF (lower Cholesky factor of the frontal
     // block), bottom-left L_SF = H_SF·L_FF⁻ᵀ, bottom-right the separator factor's Hessian
     // (symmetric); vector: d = L_FF⁻¹·b_F, then the separator factor's b.
     // Copies of the backend share both buffers until one of them re-eliminates the clique.
-    SharedBuffer m;         // only the lower triangle of the symmetric parts is kept
-    SharedBuffer marginal;  // n×n joint covariance of vars (cached per epoch)
+    SharedBuffer m;  // only the lower triangle of the symmetric parts is kept
+    std::vector<int> children;
+    std::vector<int> offsets;  // local scalar offset of vars[i]; size vars.size() + 1
+    SharedBuffer marginal;     // n×n joint covariance of vars (cached per epoch)
     long marginalEpoch = -1;
     long topStamp = -1;
-    long createdStamp = -1;
     long pathStamp = -1;
     bool alive = false;
   };
@@ -108,6 +110,13 @@ class Isam2Backend : public Backend {
   // The top of one recompute(), handed from step to step. Positions are elimination
   // positions (scratchPos_ of a top variable while recompute() runs).
   struct Top {
+    Top() = default;
+    // Scratch, not state: a copy of the backend (a new hypothesis) starts with an empty one.
+    Top(const Top&) {}
+    Top& operator=(const Top&) { return *this; }
+    /// Empties the lists for the next update; their capacity stays.
+    void clear();
+
     std::vector<int> vars;     // the variables to re-eliminate
     std::vector<int> orphans;  // untouched children of detached cliques
     std::vector<int> factors;  // factors entirely inside the top (the orphans' rows follow)
@@ -207,6 +216,7 @@ class Isam2Backend : public Backend {
   std::vector<int> constrained_;
   std::vector<int> newRoots_;
   std::vector<int> createdIndex_;  // recompute(): clique → index among the new cliques, −1
+  Top top_;                        // recompute()'s lists, kept so each update reuses them
   std::vector<double> scratch_;
 };
 

@@ -88,8 +88,16 @@ double eliminationCost(const TopPattern& t, const std::vector<int>& ord,
 
 }  // namespace
 
+void Isam2Backend::Top::clear() {
+  for (std::vector<int>* list : {&vars, &orphans, &factors, &rowPtr, &rowCol, &ov, &homeStart,
+                                 &homeRows, &etParent, &created})
+    list->clear();
+  // structure's inner lists are emptied as symbolicEliminate reuses them.
+}
+
 void Isam2Backend::recompute() {
-  Top top;
+  Top& top = top_;
+  top.clear();
   detachTop(top);
   if (top.vars.empty()) return;
   collectTopFactors(top);
@@ -264,7 +272,8 @@ void Isam2Backend::symbolicEliminate(Top& top) {
     for (int r = 0; r < nrows; ++r) homeRows[fill[rowHome[r]]++] = r;
   }
   std::vector<std::vector<int>>& structure = top.structure;
-  structure.resize(m);
+  if (static_cast<int>(structure.size()) < m) structure.resize(m);
+  for (int k = 0; k < m; ++k) structure[k].clear();
   top.etParent.assign(m, -1);
   std::vector<int> childHead(m, -1), childNext(m, -1), mark(m, -1);
   for (int k = 0; k < m; ++k) {

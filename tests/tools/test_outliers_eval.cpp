@@ -8,8 +8,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "solvers/io/dataset_reader.h"
 #include "solvers/io/estimate_writer.h"
@@ -320,6 +322,42 @@ TEST(CompareScript, VertigoRowsEndToEnd) {
   ASSERT_TRUE(std::getline(csv, row));
   EXPECT_EQ(row.rfind("intel,vertigo-local,20,1,gnc-tls,ok,", 0), 0u) << row;
   EXPECT_FALSE(std::getline(csv, row)) << "one setting, one row";
+}
+
+// A partial re-run merged into a full table: the row of the same dataset, setting, seed and
+// variant is replaced where it stood, a new one is added at the end, the rest is untouched,
+// and a changed verdict is reported.
+TEST(CompareScript, MergeIntoReplacesTheSameRunsAndAddsTheRest) {
+  const std::string dir = ::testing::TempDir() + "/compare_merge";
+  ASSERT_EQ(std::system(("rm -rf " + dir + " && mkdir -p " + dir).c_str()), 0);
+  const std::string header =
+      "dataset,mode,count,seed,variant,status,ate_rmse,rpe_trans,rpe_rot_deg,precision,recall,"
+      "rejected,inlier_chi2,reference_chi2,chi2_excess,solve_s,update_ms_mean,update_ms_p99,"
+      "update_ms_max\n";
+  std::ofstream(dir + "/table.csv")
+      << header << "intel,random,100,1,dcs,timeout,,,,,,,,,,300.2,,,\n"
+      << "intel,random,100,2,dcs,ok,0.1,0.01,0.1,1,1,100,45,45,0,2.0,1,2,3\n";
+  std::ofstream(dir + "/rerun.csv")
+      << header << "intel,random,100,1,dcs,ok,0.1,0.01,0.1,1,0.98,98,50,45,0.11,250.0,1,2,3\n"
+      << "intel,group,100,1,dcs,ok,0.1,0.01,0.1,1,1,100,45,45,0,3.0,1,2,3\n";
+  const std::string cmd = "/usr/bin/python3 " + kSource + "/tools/compare --rows " + dir +
+                          "/rerun.csv --merge-into " + dir + "/table.csv 2> " + dir + "/log.txt";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream csv(dir + "/table.csv");
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(csv, line);) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 4u) << "a header and three rows";
+  EXPECT_EQ(lines[1].rfind("intel,random,100,1,dcs,ok,0.1,", 0), 0u) << lines[1];
+  EXPECT_NE(lines[1].find(",250.0,"), std::string::npos) << "the re-run's own figures";
+  EXPECT_EQ(lines[2].rfind("intel,random,100,2,dcs,ok,", 0), 0u) << lines[2];
+  EXPECT_EQ(lines[3].rfind("intel,group,100,1,dcs,ok,", 0), 0u) << lines[3];
+  std::ifstream logFile(dir + "/log.txt");
+  const std::string log((std::istreambuf_iterator<char>(logFile)), std::istreambuf_iterator<char>());
+  EXPECT_NE(log.find("intel random 100 1 dcs: timeout -> misses"), std::string::npos) << log;
+  EXPECT_NE(log.find("1 rows replaced, 1 added"), std::string::npos) << log;
+  const std::string orphan = "/usr/bin/python3 " + kSource + "/tools/compare --rows " + dir +
+                             "/rerun.csv > /dev/null 2>&1";
+  EXPECT_NE(std::system(orphan.c_str()), 0) << "--rows without --merge-into is refused";
 }
 
 }  // namespace
