@@ -352,7 +352,8 @@ TEST(CompareScript, MergeIntoReplacesTheSameRunsAndAddsTheRest) {
   EXPECT_EQ(lines[2].rfind("intel,random,100,2,dcs,ok,", 0), 0u) << lines[2];
   EXPECT_EQ(lines[3].rfind("intel,group,100,1,dcs,ok,", 0), 0u) << lines[3];
   std::ifstream logFile(dir + "/log.txt");
-  const std::string log((std::istreambuf_iterator<char>(logFile)), std::istreambuf_iterator<char>());
+  const std::string log((std::istreambuf_iterator<char>(logFile)),
+                        std::istreambuf_iterator<char>());
   EXPECT_NE(log.find("intel random 100 1 dcs: timeout -> misses"), std::string::npos) << log;
   EXPECT_NE(log.find("1 rows replaced, 1 added"), std::string::npos) << log;
   const std::string orphan = "/usr/bin/python3 " + kSource + "/tools/compare --rows " + dir +
