@@ -41,16 +41,8 @@ double RisamBackend::tightChi2(double gate, int dim) const {
 void RisamBackend::refreshGate() {
   if (options_.shape > 0.0 || options_.tailExponent < 0.0) return;
   if (graduated_.size() < static_cast<size_t>(options_.gateMinSamples)) return;
-  const Values& x = inner_->estimate();
-  std::vector<double> q;
-  q.reserve(graduated_.size());
-  for (const auto& [id, g] : graduated_) {
-    const int dim = std::max(g.original->dim(), 1);
-    const double c2 = g.original->chi2(x);
-    if (c2 <= rejectChi2(dim)) q.push_back(c2 / chi2Quantile(dim, 0.5));
-  }
   gateAtCount_ = graduated_.size();
-  const TailGate t = tailGate(q, options_.tailExponent, options_.medianFactor);
+  const TailGate t = tailGate(acceptedNormalized(), options_.tailExponent, options_.medianFactor);
   // Wider (heavy tails): only ever widened. Tighter for every dimension (under-confident
   // information, with `tighten`): from then on it follows the estimate and stays tight (the
   // online scale swings with drift: parking-garage local 100 went 0.01 → 24 → 0.001, and
@@ -69,6 +61,37 @@ void RisamBackend::refreshGate() {
   } else if (wider && t.gate > gate_) {
     gate_ = t.gate;
   }
+}
+
+std::vector<double> RisamBackend::acceptedNormalized() const {
+  const Values& x = inner_->estimate();
+  std::vector<double> q;
+  q.reserve(graduated_.size());
+  for (const auto& [id, g] : graduated_) {
+    const int dim = std::max(g.original->dim(), 1);
+    const double c2 = g.original->chi2(x);
+    if (c2 <= rejectChi2(dim)) q.push_back(c2 / chi2Quantile(dim, 0.5));
+  }
+  return q;
+}
+
+bool RisamBackend::shrinkGateAtEnd() {
+  if (tight_ || !(gate_ > 0.0) || options_.shape > 0.0 || options_.tailExponent < 0.0) return false;
+  const std::vector<double> q = acceptedNormalized();
+  if (q.size() < static_cast<size_t>(options_.gateMinSamples)) return false;
+  bool hasDim[7] = {};
+  for (const auto& [id, g] : graduated_) hasDim[std::min(std::max(g.original->dim(), 1), 6)] = true;
+  const double next = tailGate(q, options_.tailExponent, options_.medianFactor).gate;
+  if (!(next >= 0.0)) return false;
+  for (int dim = 1; dim <= 6; ++dim) {
+    if (!hasDim[dim]) continue;
+    const double shrunk =
+        std::max(chi2Quantile(dim, options_.rejectChi2Probability), next * chi2Quantile(dim, 0.5));
+    if (!(shrunk * options_.widenFactor < rejectChi2(dim))) return false;
+  }
+  if (onlineGate_ < 0.0) onlineGate_ = gate_;
+  gate_ = next;
+  return true;
 }
 
 SigShape RisamBackend::sigShape(int dim) const {
