@@ -322,6 +322,13 @@ TEST(CompareScript, VertigoRowsEndToEnd) {
   ASSERT_TRUE(std::getline(csv, row));
   EXPECT_EQ(row.rfind("intel,vertigo-local,20,1,gnc-tls,ok,", 0), 0u) << row;
   EXPECT_FALSE(std::getline(csv, row)) << "one setting, one row";
+  // Both tables beside it: the long one per variant and the compact one the README shows.
+  std::ifstream tablesFile(out + "/tables.md");
+  const std::string tables((std::istreambuf_iterator<char>(tablesFile)),
+                           std::istreambuf_iterator<char>());
+  EXPECT_NE(tables.find("| intel | vertigo-local 20 | gnc-tls | 1/1 |"), std::string::npos)
+      << tables;
+  EXPECT_NE(tables.find("| dataset | outliers | gnc-tls |"), std::string::npos) << tables;
 }
 
 // A partial re-run merged into a full table: the row of the same dataset, setting, seed and
