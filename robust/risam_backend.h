@@ -155,7 +155,7 @@ struct RisamOptions {
   int collateralMin = 3;
   /// At optimize(), rounds of the gate re-estimated from the decided map (not tightened
   /// only): the online gate only ever widens, and a drifted map widens it far beyond what the
-  /// settled closures' own χ² say (manhattan + 1000 random, seed 3: 123 medians online, so
+  /// settled closures' own χ² say (manhattan + 1000 random, seed 3: 121 medians online, so
   /// two wrong closures whose removal gains 180 and 230 stayed in). Taken, as GncBackend's
   /// regateAtEnd, when it shrinks the rejection test by more than widenFactor for every
   /// dimension of uncertain factor; the decisions are then made again against it. The
