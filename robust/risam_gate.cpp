@@ -94,6 +94,18 @@ bool RisamBackend::shrinkGateAtEnd() {
   return true;
 }
 
+bool RisamBackend::shrinkTightGateAtEnd() {
+  if (!tight_ || options_.shape > 0.0 || options_.tailExponent < 0.0) return false;
+  const std::vector<double> q = acceptedNormalized();
+  if (q.size() < static_cast<size_t>(options_.gateMinSamples)) return false;
+  const TailGate next = tailGate(q, options_.tailExponent, options_.medianFactor);
+  if (!(next.gate > 0.0) || !(next.gate * options_.widenFactor < gate_)) return false;
+  if (onlineGate_ < 0.0) onlineGate_ = gate_, onlineTail_ = tail_;
+  gate_ = next.gate;
+  tail_ = next.tail;
+  return true;
+}
+
 SigShape RisamBackend::sigShape(int dim) const {
   const double effective = shapeSquared(dim);
   if (!tight_) return {std::sqrt(effective), 1.0};
