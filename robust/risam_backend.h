@@ -26,6 +26,7 @@
 namespace loopd {
 
 class Isam2Backend;
+struct TailGate;
 
 struct RisamOptions {
   double shape = 0.0;  // c; ≤ 0: √χ²_dim(0.95) (BackendOptions::robustParameter overrides)
@@ -256,6 +257,9 @@ class RisamBackend : public DecoratorBackend {
   void refreshGate();
   /// The closures that pass the rejection test, as χ²/χ²_dim(0.5) at the estimate.
   std::vector<double> acceptedNormalized() const;
+  /// Gate and tail re-estimated from the closures the estimate accepts (into `out`); false when
+  /// the gate is fixed (shape, no tailExponent) or fewer than gateMinSamples are accepted.
+  bool settledTailGate(TailGate& out) const;
   /// RisamOptions::endGateRounds, one round: true if the gate was shrunk.
   bool shrinkGateAtEnd();
   /// The same for a tightened gate: re-estimated (gate and tail) from the estimate, taken if

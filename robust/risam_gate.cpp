@@ -75,14 +75,21 @@ std::vector<double> RisamBackend::acceptedNormalized() const {
   return q;
 }
 
-bool RisamBackend::shrinkGateAtEnd() {
-  if (tight_ || !(gate_ > 0.0) || options_.shape > 0.0 || options_.tailExponent < 0.0) return false;
+bool RisamBackend::settledTailGate(TailGate& out) const {
+  if (options_.shape > 0.0 || options_.tailExponent < 0.0) return false;
   const std::vector<double> q = acceptedNormalized();
   if (q.size() < static_cast<size_t>(options_.gateMinSamples)) return false;
+  out = tailGate(q, options_.tailExponent, options_.medianFactor);
+  return true;
+}
+
+bool RisamBackend::shrinkGateAtEnd() {
+  TailGate settled;
+  if (tight_ || !(gate_ > 0.0) || !settledTailGate(settled)) return false;
+  const double next = settled.gate;
+  if (!(next >= 0.0)) return false;
   bool hasDim[7] = {};
   for (const auto& [id, g] : graduated_) hasDim[std::min(std::max(g.original->dim(), 1), 6)] = true;
-  const double next = tailGate(q, options_.tailExponent, options_.medianFactor).gate;
-  if (!(next >= 0.0)) return false;
   for (int dim = 1; dim <= 6; ++dim) {
     if (!hasDim[dim]) continue;
     const double shrunk =
@@ -95,10 +102,8 @@ bool RisamBackend::shrinkGateAtEnd() {
 }
 
 bool RisamBackend::shrinkTightGateAtEnd() {
-  if (!tight_ || options_.shape > 0.0 || options_.tailExponent < 0.0) return false;
-  const std::vector<double> q = acceptedNormalized();
-  if (q.size() < static_cast<size_t>(options_.gateMinSamples)) return false;
-  const TailGate next = tailGate(q, options_.tailExponent, options_.medianFactor);
+  TailGate next;
+  if (!tight_ || !settledTailGate(next)) return false;
   if (!(next.gate > 0.0) || !(next.gate * options_.widenFactor < gate_)) return false;
   if (onlineGate_ < 0.0) onlineGate_ = gate_, onlineTail_ = tail_;
   gate_ = next.gate;
