@@ -327,8 +327,8 @@ class RisamBackend : public DecoratorBackend {
   int retried_ = 0;
   size_t retriedAtCount_ = 0;
   double gate_ = 0.0;                   // noise-aware gate (normalized), 0 = defaults
-  double onlineGate_ = -1.0;            // gate_ before shrinkGateAtEnd (< 0: not shrunk)
-  double onlineTail_ = 0.0;             // tail_ before shrinkTightGateAtEnd
+  double onlineGate_ = -1.0;            // gate_ before the end-gate rounds (< 0: not shrunk)
+  double onlineTail_ = 0.0;             // tail_ before them
   bool tight_ = false;                  // gate_ is below the defaults (tighten)
   double tail_ = 0.0;                   // with tight_: the uncapped tail gate (normalized)
   bool atTail_ = false;                 // optimize(): tight_ decisions against tail_

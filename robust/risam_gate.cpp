@@ -96,7 +96,7 @@ bool RisamBackend::shrinkGateAtEnd() {
         std::max(chi2Quantile(dim, options_.rejectChi2Probability), next * chi2Quantile(dim, 0.5));
     if (!(shrunk * options_.widenFactor < rejectChi2(dim))) return false;
   }
-  if (onlineGate_ < 0.0) onlineGate_ = gate_;
+  if (onlineGate_ < 0.0) onlineGate_ = gate_, onlineTail_ = tail_;
   gate_ = next;
   return true;
 }

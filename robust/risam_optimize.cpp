@@ -242,7 +242,7 @@ void RisamBackend::restoreGraduated() {
   atTail_ = false;
   if (onlineGate_ >= 0.0) {  // the online gate (only ever widened, or following the map)
     gate_ = onlineGate_;
-    if (tight_) tail_ = onlineTail_;
+    tail_ = onlineTail_;
   }
   onlineGate_ = -1.0;
   std::vector<FactorId> ids;
