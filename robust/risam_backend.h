@@ -167,6 +167,20 @@ struct RisamOptions {
   /// against 0.0015 for `gnc-tls`, so a group of 10 whose removal gains 10.3 stayed in
   /// against summed tests of 13.5). 0: off.
   int endGateRounds = 3;
+  /// The first noise-aware gate that does not tighten (it would widen, or stay at the
+  /// defaults) is checked against a batch GNC (`gnc-tls`, GncBackend with its defaults) over
+  /// the graph so far, from the online estimate. If the accepted closures' gate at the GNC's
+  /// solution tightens, the online map was bent: until the gate exists the default tests
+  /// apply, and under-confident information lets wrong closures bend a flexible map until they
+  /// pass them, after which a gate read off it looks like a heavy tail and widens, and a
+  /// widened gate is never narrowed online (parking-garage's first 500 poses + 1000 local
+  /// wrong closures, seed 1: every one of the 320 accepted, ×2·10⁵ the optimum). Then the
+  /// inner iSAM2 takes the GNC's solution, the gate and tail its accepted closures give, and
+  /// every uncertain factor its SIG kernel at μ = 1 there. Online once per run; and at
+  /// optimize() while there are fewer than gateMinSamples uncertain factors (no gate yet) and
+  /// their number changed since the last check (parking-garage:500 + 1000 in groups, seed 1:
+  /// 40 wrong closures among fewer than 200, all accepted, ×3.9·10³).
+  bool batchGateCheck = true;
 };
 
 class RisamBackend : public DecoratorBackend {
@@ -201,6 +215,10 @@ class RisamBackend : public DecoratorBackend {
   int droppedBending() const { return droppedBending_; }
   /// Rounds in which optimize() shrank the gate (RisamOptions::endGateRounds).
   int endGateShrinks() const { return endGateShrinks_; }
+  /// Batch GNC checks of the first gate run, and those whose tight gate was taken
+  /// (RisamOptions::batchGateCheck).
+  int batchGateChecks() const { return batchGateChecks_; }
+  int batchGatesAdopted() const { return batchGatesAdopted_; }
   static constexpr FactorId kInternalIdBit = FactorId{1} << 63;
 
  private:
@@ -254,7 +272,12 @@ class RisamBackend : public DecoratorBackend {
   double tailChi2(int dim) const;
   /// A tightened gate as χ²: g·χ²_dim(0.5), at most χ²_dim(0.95)/widenFactor.
   double tightChi2(double gate, int dim) const;
+  /// Whether a gate (normalized) is wider than the defaults by widenFactor for some dimension,
+  /// and (with `tighten`) tighter by it for every one.
+  void gateDirection(double gate, bool& wider, bool& tighter) const;
   void refreshGate();
+  /// RisamOptions::batchGateCheck: true if the GNC's tight gate and solution were taken.
+  bool adoptBatchGate();
   /// The closures that pass the rejection test, as χ²/χ²_dim(0.5) at the estimate.
   std::vector<double> acceptedNormalized() const;
   /// Gate and tail re-estimated from the closures the estimate accepts (into `out`); false when
@@ -322,6 +345,10 @@ class RisamBackend : public DecoratorBackend {
   int freshStartsKept_ = 0;
   int droppedBending_ = 0;
   int endGateShrinks_ = 0;
+  int batchGateChecks_ = 0;
+  int batchGatesAdopted_ = 0;
+  bool onlineGateChecked_ = false;    // the first gate with gateMinSamples was checked
+  size_t smallGateCheckAtCount_ = 0;  // uncertain factors at the last check below them
   bool refeeding_ = false;            // refeedSingly: the factors are in originals_ already
   std::vector<double> runawayStart_;  // the estimate's storage before the current arrival
   int retried_ = 0;

@@ -1,12 +1,16 @@
 // riSAM's kernel shape and tests: the μ schedule, the SIG shape c², the rejection and tail
-// tests, and the noise-aware gate that widens or tightens them (RisamOptions).
+// tests, and the noise-aware gate that widens or tightens them, with the batch GNC check of
+// the first one (RisamOptions).
 #include "robust/risam_backend.h"
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
+#include <unordered_set>
 #include <vector>
 
 #include "robust/gnc_backend.h"
+#include "solvers/incremental/isam2.h"
 
 namespace loopd {
 
@@ -38,6 +42,16 @@ double RisamBackend::tightChi2(double gate, int dim) const {
                   chi2Quantile(std::max(dim, 1), 0.95) / options_.widenFactor);
 }
 
+void RisamBackend::gateDirection(double gate, bool& wider, bool& tighter) const {
+  wider = false;
+  tighter = options_.tighten;
+  for (int dim = 1; dim <= 6; ++dim) {
+    const double g = gate * chi2Quantile(dim, 0.5), d = chi2Quantile(dim, 0.95);
+    wider = wider || g > options_.widenFactor * d;
+    tighter = tighter && g * options_.widenFactor < d;
+  }
+}
+
 void RisamBackend::refreshGate() {
   if (options_.shape > 0.0 || options_.tailExponent < 0.0) return;
   if (graduated_.size() < static_cast<size_t>(options_.gateMinSamples)) return;
@@ -48,11 +62,13 @@ void RisamBackend::refreshGate() {
   // online scale swings with drift: parking-garage local 100 went 0.01 → 24 → 0.001, and
   // widening in the swing let wrong closures bend the map).
   if (!(t.gate > 0.0)) return;
-  bool wider = false, tighter = options_.tighten;
-  for (int dim = 1; dim <= 6; ++dim) {
-    const double g = t.gate * chi2Quantile(dim, 0.5), d = chi2Quantile(dim, 0.95);
-    wider = wider || g > options_.widenFactor * d;
-    tighter = tighter && g * options_.widenFactor < d;
+  bool wider = false, tighter = false;
+  gateDirection(t.gate, wider, tighter);
+  // The first gate that does not tighten may have been read off a map the defaults let wrong
+  // closures bend (RisamOptions::batchGateCheck).
+  if (!tight_ && !tighter && !onlineGateChecked_) {
+    onlineGateChecked_ = true;
+    if (options_.batchGateCheck && innerIsam2_ && adoptBatchGate()) return;
   }
   if (tight_ || tighter) {
     gate_ = t.gate;
@@ -61,6 +77,46 @@ void RisamBackend::refreshGate() {
   } else if (wider && t.gate > gate_) {
     gate_ = t.gate;
   }
+}
+
+bool RisamBackend::adoptBatchGate() {
+  ++batchGateChecks_;
+  GncBackend gnc(BackendOptions{}, GncOptions{});
+  BackendUpdate all;
+  all.initial = inner_->estimate();
+  for (const auto& f : originals_.factors()) all.factors.push_back(f);
+  try {
+    gnc.update(all);
+    gnc.optimize();
+  } catch (const std::exception&) {
+    return false;  // a check that cannot run leaves the online gate as it was
+  }
+  const Values& x = gnc.estimate();
+  if (!x.allFinite()) return false;
+  const std::vector<FactorId> out = gnc.rejected();
+  const std::unordered_set<FactorId> rejectedByGnc(out.begin(), out.end());
+  std::vector<double> q;
+  for (const auto& [id, g] : graduated_)
+    if (!rejectedByGnc.count(id))
+      q.push_back(g.original->chi2(x) / chi2Quantile(std::max(g.original->dim(), 1), 0.5));
+  const TailGate t = tailGate(q, options_.tailExponent, options_.medianFactor);
+  if (!(t.gate > 0.0)) return false;
+  bool wider = false, tighter = false;
+  gateDirection(t.gate, wider, tighter);
+  if (!tighter) return false;
+  innerIsam2_->resetEstimate(x);
+  gate_ = t.gate;
+  tail_ = t.tail;
+  tight_ = true;
+  regraduatedAtGate_ = gate_;  // graduated below, at μ = 1 from the GNC's solution
+  std::vector<FactorId> ids;
+  ids.reserve(graduated_.size());
+  for (const auto& [id, g] : graduated_) ids.push_back(id);
+  inner_->update(regraduate(ids, 1.0));
+  inner_->optimize();
+  markFarOut(ids);
+  ++batchGatesAdopted_;
+  return true;
 }
 
 std::vector<double> RisamBackend::acceptedNormalized() const {

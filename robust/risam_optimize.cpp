@@ -21,6 +21,13 @@ void RisamBackend::optimize() {
   gateAtCount_ = 0;
   atTail_ = false;
   refreshGate();
+  // No gate yet (too few closures for one): the defaults' answer checked in batch.
+  if (options_.batchGateCheck && !tight_ && innerIsam2_ &&
+      graduated_.size() < static_cast<size_t>(options_.gateMinSamples) &&
+      graduated_.size() != smallGateCheckAtCount_) {
+    smallGateCheckAtCount_ = graduated_.size();
+    adoptBatchGate();
+  }
   regraduateIfTightened();
   atTail_ = tight_;
   // Rejected closures that the map's own uncertainty explains are graduated again (online
