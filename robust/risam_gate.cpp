@@ -109,9 +109,7 @@ bool RisamBackend::adoptBatchGate() {
   tail_ = t.tail;
   tight_ = true;
   regraduatedAtGate_ = gate_;  // graduated below, at μ = 1 from the GNC's solution
-  std::vector<FactorId> ids;
-  ids.reserve(graduated_.size());
-  for (const auto& [id, g] : graduated_) ids.push_back(id);
+  const std::vector<FactorId> ids = graduatedIds();
   inner_->update(regraduate(ids, 1.0));
   inner_->optimize();
   markFarOut(ids);
@@ -119,15 +117,20 @@ bool RisamBackend::adoptBatchGate() {
   return true;
 }
 
+std::vector<FactorId> RisamBackend::graduatedIds() const {
+  std::vector<FactorId> ids;
+  ids.reserve(graduated_.size());
+  for (const auto& [id, g] : graduated_) ids.push_back(id);
+  return ids;
+}
+
 std::vector<double> RisamBackend::acceptedNormalized() const {
   const Values& x = inner_->estimate();
   std::vector<double> q;
   q.reserve(graduated_.size());
-  for (const auto& [id, g] : graduated_) {
-    const int dim = std::max(g.original->dim(), 1);
-    const double c2 = g.original->chi2(x);
-    if (c2 <= rejectChi2(dim)) q.push_back(c2 / chi2Quantile(dim, 0.5));
-  }
+  for (const auto& [id, g] : graduated_)
+    if (g.original->chi2(x) <= rejectChi2(std::max(g.original->dim(), 1)))
+      q.push_back(g.original->chi2(x) / chi2Quantile(std::max(g.original->dim(), 1), 0.5));
   return q;
 }
 

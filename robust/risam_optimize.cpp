@@ -14,10 +14,8 @@
 namespace loopd {
 
 void RisamBackend::optimize() {
-  if (graduated_.empty()) {
-    inner_->optimize();
-    return;
-  }
+  if (graduated_.empty() || options_.convergeFirst) inner_->optimize();
+  if (graduated_.empty()) return;
   gateAtCount_ = 0;
   atTail_ = false;
   refreshGate();
@@ -303,9 +301,7 @@ void RisamBackend::regraduateIfTightened() {
       (regraduatedAtGate_ > 0.0 && gate_ * options_.regraduateFactor >= regraduatedAtGate_))
     return;
   regraduatedAtGate_ = gate_;
-  std::vector<FactorId> all;
-  all.reserve(graduated_.size());
-  for (const auto& [id, g] : graduated_) all.push_back(id);  // parked ones too
+  const std::vector<FactorId> all = graduatedIds();
   // Converged at each μ: one Gauss–Newton step per μ with every closure's weight changing at
   // once ran away (RisamOnline.RegraduatesEveryClosureWithoutRunningAway…).
   if (!all.empty()) graduateAgain(all, true);
