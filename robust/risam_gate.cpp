@@ -79,21 +79,27 @@ void RisamBackend::refreshGate() {
   }
 }
 
-bool RisamBackend::adoptBatchGate() {
-  ++batchGateChecks_;
-  GncBackend gnc(BackendOptions{}, GncOptions{});
+std::unique_ptr<GncBackend> RisamBackend::solveBatchGnc() const {
+  auto gnc = std::make_unique<GncBackend>(BackendOptions{}, GncOptions{});
   BackendUpdate all;
   all.initial = inner_->estimate();
   for (const auto& f : originals_.factors()) all.factors.push_back(f);
   try {
-    gnc.update(all);
-    gnc.optimize();
+    gnc->update(all);
+    gnc->optimize();
   } catch (const std::exception&) {
-    return false;  // a check that cannot run leaves the online gate as it was
+    return nullptr;  // a look that cannot run leaves the answer as it was
   }
-  const Values& x = gnc.estimate();
-  if (!x.allFinite()) return false;
-  const std::vector<FactorId> out = gnc.rejected();
+  if (!gnc->estimate().allFinite()) return nullptr;
+  return gnc;
+}
+
+bool RisamBackend::adoptBatchGate() {
+  ++batchGateChecks_;
+  const std::unique_ptr<GncBackend> gnc = solveBatchGnc();
+  if (!gnc) return false;
+  const Values& x = gnc->estimate();
+  const std::vector<FactorId> out = gnc->rejected();
   const std::unordered_set<FactorId> rejectedByGnc(out.begin(), out.end());
   std::vector<double> q;
   for (const auto& [id, g] : graduated_)

@@ -56,7 +56,29 @@ void RisamBackend::optimize() {
     admitFinalCandidates();
     takeSecondLooks();
   }
+  if (!rejected().empty()) tryGncLook();
   finalized_ = true;
+}
+
+// Judged at the gate like the second looks; a kept answer is then decided against the tail.
+void RisamBackend::tryGncLook() {
+  if (!options_.gncLook || !innerIsam2_) return;
+  ++gncLooks_;
+  atTail_ = false;
+  const Answer before = answer();
+  const std::unique_ptr<GncBackend> gnc = solveBatchGnc();
+  bool kept = false;
+  if (gnc) {
+    innerIsam2_->resetEstimate(gnc->estimate());
+    decideAndSolve(nullptr);
+    admitFinalCandidates();
+    kept = truncatedCost() < before.cost * (1.0 - 1e-9);
+    if (!kept) restore(before);
+  }
+  atTail_ = tight_;
+  if (!kept) return;
+  ++gncLooksKept_;
+  if (tight_) decideAndSolve(nullptr);
 }
 
 // Second looks (dropBending, tryFreshStart), judged at the gate: at the wider tail a wrong
