@@ -182,13 +182,16 @@ struct RisamOptions {
   /// their number changed since the last check (parking-garage:500 + 1000 in groups, seed 1:
   /// 40 wrong closures among fewer than 200, all accepted, ×3.9·10³).
   bool batchGateCheck = true;
-  /// optimize() first converges the inner backend at the current weights before it reads the
-  /// gate or makes a decision: an update can end mid-graduation with the map bent for one
-  /// step (the next update would bring it back), and decisions read off that map stick
-  /// (parking-garage + 1000 local wrong closures, seed 3: the file ends in such a bend, χ²
-  /// over the true edges ×10⁹ at poses 1659–1660; read off it, the gate fell below its
-  /// online value and 15 true closures were rejected, +3.8%).
-  bool convergeFirst = true;
+  /// optimize() first takes at most this many full Gauss–Newton steps of the inner iSAM2 at
+  /// the current weights (Isam2Backend::settle: each kept only if the cost falls) before it
+  /// reads the gate or makes a decision: an update can end mid-graduation with the map bent
+  /// for one step (the next update would bring it back), and decisions read off that map
+  /// stick (parking-garage + 1000 local wrong closures, seed 3: the file ends in such a bend,
+  /// χ² over the true edges ×10⁹ at poses 1659–1660; read off it, the gate fell below its
+  /// online value and 15 true closures were rejected, +3.8%). Not a full optimize(): under
+  /// SIG weights Gauss–Newton goes uphill on a settled map and its batch fallback cost
+  /// manhattan without outliers 2.9 s. 0: off.
+  int convergeFirstSteps = 5;
   /// optimize(), when its answer rejects anything, last looks at a batch GNC's (`gnc-tls`,
   /// GncBackend with its defaults, over the whole graph from the answer): the inner iSAM2 is
   /// reset to the GNC's solution and the closures decided there by risam's own tests; kept if

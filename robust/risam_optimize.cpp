@@ -14,8 +14,11 @@
 namespace loopd {
 
 void RisamBackend::optimize() {
-  if (graduated_.empty() || options_.convergeFirst) inner_->optimize();
-  if (graduated_.empty()) return;
+  if (graduated_.empty()) {
+    inner_->optimize();
+    return;
+  }
+  if (innerIsam2_) innerIsam2_->settle(options_.convergeFirstSteps);
   gateAtCount_ = 0;
   atTail_ = false;
   refreshGate();

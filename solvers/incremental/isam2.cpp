@@ -220,45 +220,49 @@ void Isam2Backend::resetEstimate(const Values& x) {
   relinearizeAllAtEstimate();
 }
 
-void Isam2Backend::optimize() {
-  if (factors_.empty()) return;
-  auto cost = [&]() {
-    double c = graph_.chi2(estimate_);
-    if (gaugeFactor_ >= 0) c += factors_[gaugeFactor_]->chi2(estimate_);
-    return c;
-  };
-  auto fullStep = [&]() {
+double Isam2Backend::costWithGauge() const {
+  double c = graph_.chi2(estimate_);
+  if (gaugeFactor_ >= 0) c += factors_[gaugeFactor_]->chi2(estimate_);
+  return c;
+}
+
+bool Isam2Backend::fullSteps(int maxSteps, double& previous, int& iterations) {
+  for (int it = 0; it < maxSteps; ++it) {
     relinearizeAllAtEstimate();
     backSubstitute(nullptr);
-  };
-  auto revert = [&]() {  // back to θ (the estimate before the last step)
-    ++epoch_;
-    for (int v = 0; v < theta_.size(); ++v) {
-      std::memcpy(estimate_.data(v), theta_.data(v), sizeof(double) * kValueStride);
-      std::fill_n(&delta_[static_cast<size_t>(v) * kMaxVarDim], kMaxVarDim, 0.0);
+    ++iterations;
+    const double current = costWithGauge();
+    if (!(current <= previous * (1.0 + 1e-9) + 1e-12)) {
+      ++epoch_;  // back to θ (the estimate before the last step)
+      for (int v = 0; v < theta_.size(); ++v) {
+        std::memcpy(estimate_.data(v), theta_.data(v), sizeof(double) * kValueStride);
+        std::fill_n(&delta_[static_cast<size_t>(v) * kMaxVarDim], kMaxVarDim, 0.0);
+      }
+      return false;
     }
-  };
+    const double gain = previous - current;
+    previous = current;
+    if (gain <= isam_.finalRelativeTolerance * current + 1e-14) return true;
+  }
+  return false;
+}
+
+void Isam2Backend::settle(int maxSteps) {
+  if (factors_.empty() || maxSteps <= 0) return;
+  double previous = costWithGauge();
+  int iterations = 0;
+  fullSteps(maxSteps, previous, iterations);
+}
+
+void Isam2Backend::optimize() {
+  if (factors_.empty()) return;
   summary_ = {};
   summary_.initialChi2 = graph_.chi2(estimate_);
-  double previous = cost();
+  double previous = costWithGauge();
   int iterations = 0;
   bool converged = false, usedBatch = false;
   for (int round = 0; round < 2 && !converged; ++round) {
-    for (int it = 0; it < isam_.maxFinalIterations; ++it) {
-      fullStep();
-      ++iterations;
-      const double current = cost();
-      if (!(current <= previous * (1.0 + 1e-9) + 1e-12)) {
-        revert();
-        break;
-      }
-      const double gain = previous - current;
-      previous = current;
-      if (gain <= isam_.finalRelativeTolerance * current + 1e-14) {
-        converged = true;
-        break;
-      }
-    }
+    converged = fullSteps(isam_.maxFinalIterations, previous, iterations);
     if (converged || round == 1) break;
     // Gauss–Newton went uphill: Levenberg–Marquardt on the whole graph, then rebuild.
     usedBatch = true;
@@ -272,7 +276,7 @@ void Isam2Backend::optimize() {
     NonlinearOptimizer lm(all, estimate_, fixed, o);
     const OptimizerResult r = lm.optimize(estimate_);
     iterations += r.iterations;
-    previous = cost();
+    previous = costWithGauge();
   }
   if (!converged) {
     // Leave the tree linearized at the final estimate without taking another step.

@@ -501,7 +501,7 @@ TEST(RisamFinal, ReestimatesATightGateSetOnABentOnlineMap) {
 // online weights, every wrong closure is out and the odometry fits.
 TEST(RisamFinal, ConvergesBeforeItDecides) {
   RisamOptions without;
-  without.convergeFirst = false;
+  without.convergeFirstSteps = 0;
   without.gncLook = false;  // it would reach the optimum too: the convergence is tested alone
   const FinalAnswer bent = finalOnIntel(269, 1, without);
   const FinalAnswer settled = finalOnIntel(269, 1, RisamOptions{});

@@ -163,6 +163,36 @@ TEST(Isam2, ResetEstimateMovesTheLinearizationPointAndOptimizeRecovers) {
   EXPECT_NEAR(isam.chi2(), p.graph.chi2(optimum), 1e-6 * p.graph.chi2(optimum));
 }
 
+// settle() takes optimize()'s full steps, at most as many as asked: from a moved estimate a
+// few reach the optimum; at the optimum the estimate stays where it was.
+TEST(Isam2, SettleTakesAtMostTheStepsAskedAndKeepsASettledMap) {
+  const PoseGraphProblem p = prefix(load("intel.g2o"), 300);
+  Isam2Backend isam;
+  feed(isam, p);
+  isam.optimize();
+  const Values optimum = isam.estimate();
+  const double best = p.graph.chi2(optimum);
+  Values moved;
+  for (int s = 0; s < optimum.size(); s += 2) {
+    const SE2 x = optimum.se2(s);
+    moved.insert(optimum.key(s), SE2(x.x + 0.5, x.y - 0.3, x.theta + 0.05));
+  }
+  isam.resetEstimate(moved);
+  const double start = isam.chi2();
+  isam.settle(0);
+  EXPECT_EQ(isam.chi2(), start);
+  isam.settle(1);
+  const double oneStep = isam.chi2();
+  EXPECT_LT(oneStep, start);
+  isam.settle(10);
+  EXPECT_LE(isam.chi2(), oneStep);
+  EXPECT_NEAR(isam.chi2(), best, 1e-6 * best);
+  const Values settled = isam.estimate();
+  isam.settle(5);
+  for (int s = 0; s < settled.size(); ++s)
+    EXPECT_LT(tangentDistance(settled, s, isam.estimate(), s), 1e-6);
+}
+
 TEST(Isam2, RemovingAFactorEqualsNeverAddingIt) {
   const PoseGraphProblem p = prefix(load("manhattan.g2o"), 300);
   // Two loop closures: one removed mid-stream, one removed after the end.
