@@ -226,7 +226,8 @@ double Isam2Backend::costWithGauge() const {
   return c;
 }
 
-bool Isam2Backend::fullSteps(int maxSteps, double& previous, int& iterations) {
+bool Isam2Backend::fullSteps(int maxSteps, double relativeTolerance, double& previous,
+                             int& iterations) {
   for (int it = 0; it < maxSteps; ++it) {
     relinearizeAllAtEstimate();
     backSubstitute(nullptr);
@@ -242,16 +243,16 @@ bool Isam2Backend::fullSteps(int maxSteps, double& previous, int& iterations) {
     }
     const double gain = previous - current;
     previous = current;
-    if (gain <= isam_.finalRelativeTolerance * current + 1e-14) return true;
+    if (gain <= relativeTolerance * current + 1e-14) return true;
   }
   return false;
 }
 
-void Isam2Backend::settle(int maxSteps) {
+void Isam2Backend::settle(int maxSteps, double relativeGain) {
   if (factors_.empty() || maxSteps <= 0) return;
   double previous = costWithGauge();
   int iterations = 0;
-  fullSteps(maxSteps, previous, iterations);
+  fullSteps(maxSteps, relativeGain, previous, iterations);
 }
 
 void Isam2Backend::optimize() {
@@ -262,7 +263,8 @@ void Isam2Backend::optimize() {
   int iterations = 0;
   bool converged = false, usedBatch = false;
   for (int round = 0; round < 2 && !converged; ++round) {
-    converged = fullSteps(isam_.maxFinalIterations, previous, iterations);
+    converged =
+        fullSteps(isam_.maxFinalIterations, isam_.finalRelativeTolerance, previous, iterations);
     if (converged || round == 1) break;
     // Gauss–Newton went uphill: Levenberg–Marquardt on the whole graph, then rebuild.
     usedBatch = true;

@@ -61,9 +61,10 @@ class Isam2Backend : public Backend {
   /// Moves the variables x holds to its values and relinearizes the whole tree there, without
   /// taking a step (a caller undoing a runaway: riSAM). Variables x lacks keep theirs.
   void resetEstimate(const Values& x);
-  /// At most maxSteps of optimize()'s full Gauss–Newton steps, without its batch fallback:
-  /// cheap, and enough to settle a map one update left mid-way (riSAM's optimize()).
-  void settle(int maxSteps);
+  /// optimize()'s full Gauss–Newton steps, without its batch fallback, until one lowers the
+  /// cost by less than relativeGain of it (kept), one raises it (taken back), or maxSteps
+  /// ran: cheap, and enough to settle a map one update left mid-way (riSAM's optimize()).
+  void settle(int maxSteps, double relativeGain);
   const Values& estimate() const override { return estimate_; }
   const FactorGraph& graph() const override { return graph_; }
   Eigen::MatrixXd marginalCovariance(const std::vector<Key>& keys) override;
@@ -146,8 +147,9 @@ class Isam2Backend : public Backend {
   /// χ² of the graph and the internal gauge prior at the estimate.
   double costWithGauge() const;
   /// optimize()'s full steps from cost `previous` (updated): true when one gains less than
-  /// finalRelativeTolerance; false when one goes uphill (reverted to θ) or maxSteps ran out.
-  bool fullSteps(int maxSteps, double& previous, int& iterations);
+  /// relativeTolerance of the cost; false when one goes uphill (reverted to θ) or maxSteps
+  /// ran out.
+  bool fullSteps(int maxSteps, double relativeTolerance, double& previous, int& iterations);
 
   // --- re-elimination of the top (isam2_recompute.cpp)
   /// Re-eliminates the top formed by affected_ (constrained_ ordered last).

@@ -179,16 +179,16 @@ TEST(Isam2, SettleTakesAtMostTheStepsAskedAndKeepsASettledMap) {
   }
   isam.resetEstimate(moved);
   const double start = isam.chi2();
-  isam.settle(0);
+  isam.settle(0, 0.0);
   EXPECT_EQ(isam.chi2(), start);
-  isam.settle(1);
+  isam.settle(1, 0.0);
   const double oneStep = isam.chi2();
   EXPECT_LT(oneStep, start);
-  isam.settle(10);
+  isam.settle(10, 1e-10);
   EXPECT_LE(isam.chi2(), oneStep);
   EXPECT_NEAR(isam.chi2(), best, 1e-6 * best);
   const Values settled = isam.estimate();
-  isam.settle(5);
+  isam.settle(5, 1e-10);
   for (int s = 0; s < settled.size(); ++s)
     EXPECT_LT(tangentDistance(settled, s, isam.estimate(), s), 1e-6);
 }
