@@ -132,6 +132,16 @@ TEST(Isam2, EqualsBatchOptimumOnIntelWithoutFinalOptimizeIsClose) {
   EXPECT_LT(online, 1.05 * isam.chi2());
 }
 
+// Every other pose of `x` moved by (0.5, −0.3, 0.05); the rest left out.
+Values everyOtherPoseMoved(const Values& x) {
+  Values moved;
+  for (int s = 0; s < x.size(); s += 2) {
+    const SE2 pose = x.se2(s);
+    moved.insert(x.key(s), SE2(pose.x + 0.5, pose.y - 0.3, pose.theta + 0.05));
+  }
+  return moved;
+}
+
 // resetEstimate moves the variables it is given (others keep theirs) without a step, and the
 // tree is relinearized there: the next optimize() converges from that point to the optimum.
 TEST(Isam2, ResetEstimateMovesTheLinearizationPointAndOptimizeRecovers) {
@@ -140,11 +150,7 @@ TEST(Isam2, ResetEstimateMovesTheLinearizationPointAndOptimizeRecovers) {
   feed(isam, p);
   isam.optimize();
   const Values optimum = isam.estimate();
-  Values moved;
-  for (int s = 0; s < optimum.size(); s += 2) {
-    const SE2 x = optimum.se2(s);
-    moved.insert(optimum.key(s), SE2(x.x + 0.5, x.y - 0.3, x.theta + 0.05));
-  }
+  const Values moved = everyOtherPoseMoved(optimum);
   isam.resetEstimate(moved);
   for (int s = 0; s < optimum.size(); ++s) {
     const int m = moved.slot(optimum.key(s));
@@ -172,11 +178,7 @@ TEST(Isam2, SettleTakesAtMostTheStepsAskedAndKeepsASettledMap) {
   isam.optimize();
   const Values optimum = isam.estimate();
   const double best = p.graph.chi2(optimum);
-  Values moved;
-  for (int s = 0; s < optimum.size(); s += 2) {
-    const SE2 x = optimum.se2(s);
-    moved.insert(optimum.key(s), SE2(x.x + 0.5, x.y - 0.3, x.theta + 0.05));
-  }
+  const Values moved = everyOtherPoseMoved(optimum);
   isam.resetEstimate(moved);
   const double start = isam.chi2();
   isam.settle(0, 0.0);
