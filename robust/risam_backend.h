@@ -183,7 +183,8 @@ struct RisamOptions {
   /// 40 wrong closures among fewer than 200, all accepted, ×3.9·10³).
   bool batchGateCheck = true;
   /// optimize() first takes at most this many full Gauss–Newton steps of the inner iSAM2 at
-  /// the current weights (Isam2Backend::settle: each kept only if the cost falls) before it
+  /// the current weights (Isam2Backend::settle: each kept only if the cost falls; the first
+  /// that gains less than 10% is the last, so a settled map takes one) before it
   /// reads the gate or makes a decision: an update can end mid-graduation with the map bent
   /// for one step (the next update would bring it back), and decisions read off that map
   /// stick (parking-garage + 1000 local wrong closures, seed 3: the file ends in such a bend,
@@ -378,9 +379,9 @@ class RisamBackend : public DecoratorBackend {
   int droppedBending_ = 0;
   int endGateShrinks_ = 0;
   int batchGateChecks_ = 0;
+  int batchGatesAdopted_ = 0;
   int gncLooks_ = 0;
   int gncLooksKept_ = 0;
-  int batchGatesAdopted_ = 0;
   bool onlineGateChecked_ = false;    // the first gate with gateMinSamples was checked
   size_t smallGateCheckAtCount_ = 0;  // uncertain factors at the last check below them
   bool refeeding_ = false;            // refeedSingly: the factors are in originals_ already

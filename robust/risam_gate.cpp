@@ -134,9 +134,11 @@ std::vector<double> RisamBackend::acceptedNormalized() const {
   const Values& x = inner_->estimate();
   std::vector<double> q;
   q.reserve(graduated_.size());
-  for (const auto& [id, g] : graduated_)
-    if (g.original->chi2(x) <= rejectChi2(std::max(g.original->dim(), 1)))
-      q.push_back(g.original->chi2(x) / chi2Quantile(std::max(g.original->dim(), 1), 0.5));
+  for (const auto& [id, g] : graduated_) {
+    const int dim = std::max(g.original->dim(), 1);
+    const double c2 = g.original->chi2(x);
+    if (c2 <= rejectChi2(dim)) q.push_back(c2 / chi2Quantile(dim, 0.5));
+  }
   return q;
 }
 
