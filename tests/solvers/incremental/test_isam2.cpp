@@ -132,26 +132,31 @@ TEST(Isam2, EqualsBatchOptimumOnIntelWithoutFinalOptimizeIsClose) {
   EXPECT_LT(online, 1.05 * isam.chi2());
 }
 
-// Every other pose of `x` moved by (0.5, −0.3, 0.05); the rest left out.
-Values everyOtherPoseMoved(const Values& x) {
-  Values moved;
-  for (int s = 0; s < x.size(); s += 2) {
-    const SE2 pose = x.se2(s);
-    moved.insert(x.key(s), SE2(pose.x + 0.5, pose.y - 0.3, pose.theta + 0.05));
+// intel's first 300 poses fed online and optimized, then every other pose of the optimum
+// moved by (0.5, −0.3, 0.05) with resetEstimate (the rest left out of `moved`).
+struct MovedOffTheOptimum {
+  MovedOffTheOptimum() {
+    feed(isam, p);
+    isam.optimize();
+    optimum = isam.estimate();
+    for (int s = 0; s < optimum.size(); s += 2) {
+      const SE2 pose = optimum.se2(s);
+      moved.insert(optimum.key(s), SE2(pose.x + 0.5, pose.y - 0.3, pose.theta + 0.05));
+    }
+    isam.resetEstimate(moved);
   }
-  return moved;
-}
+  const PoseGraphProblem p = prefix(load("intel.g2o"), 300);
+  Isam2Backend isam;
+  Values optimum, moved;
+};
 
 // resetEstimate moves the variables it is given (others keep theirs) without a step, and the
 // tree is relinearized there: the next optimize() converges from that point to the optimum.
 TEST(Isam2, ResetEstimateMovesTheLinearizationPointAndOptimizeRecovers) {
-  const PoseGraphProblem p = prefix(load("intel.g2o"), 300);
-  Isam2Backend isam;
-  feed(isam, p);
-  isam.optimize();
-  const Values optimum = isam.estimate();
-  const Values moved = everyOtherPoseMoved(optimum);
-  isam.resetEstimate(moved);
+  MovedOffTheOptimum run;
+  const PoseGraphProblem& p = run.p;
+  Isam2Backend& isam = run.isam;
+  const Values &optimum = run.optimum, &moved = run.moved;
   for (int s = 0; s < optimum.size(); ++s) {
     const int m = moved.slot(optimum.key(s));
     const Values& expected = m >= 0 ? moved : optimum;
@@ -172,14 +177,9 @@ TEST(Isam2, ResetEstimateMovesTheLinearizationPointAndOptimizeRecovers) {
 // settle() takes optimize()'s full steps, at most as many as asked: from a moved estimate a
 // few reach the optimum; at the optimum the estimate stays where it was.
 TEST(Isam2, SettleTakesAtMostTheStepsAskedAndKeepsASettledMap) {
-  const PoseGraphProblem p = prefix(load("intel.g2o"), 300);
-  Isam2Backend isam;
-  feed(isam, p);
-  isam.optimize();
-  const Values optimum = isam.estimate();
-  const double best = p.graph.chi2(optimum);
-  const Values moved = everyOtherPoseMoved(optimum);
-  isam.resetEstimate(moved);
+  MovedOffTheOptimum run;
+  Isam2Backend& isam = run.isam;
+  const double best = run.p.graph.chi2(run.optimum);
   const double start = isam.chi2();
   isam.settle(0, 0.0);
   EXPECT_EQ(isam.chi2(), start);
