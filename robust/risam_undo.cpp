@@ -46,12 +46,8 @@ UpdateResult RisamBackend::update(const BackendUpdate& u) {
   const int beforeSize = x.size();
   const size_t n = static_cast<size_t>(beforeSize) * kValueStride;
   runawayStart_.resize(n);
-  double extent = 0.0;
-  const double* from = x.data(0);
-  for (size_t i = 0; i < n; ++i) {
-    runawayStart_[i] = from[i];
-    extent = std::max(extent, std::abs(from[i]));
-  }
+  std::copy(x.data(0), x.data(0) + n, runawayStart_.begin());
+  const double extent = x.largestMagnitude();
   const int absorbedBefore = absorbedUpdates_;
   UpdateResult result = updateArrival(u);
   // Absorbed arrivals are checked too: "absorbed" looks at the closures only.

@@ -200,6 +200,10 @@ TEST(Values, AllFiniteFindsNanAndInfinity) {
   EXPECT_EQ(v.largestMagnitude(), 3.0);  // the landmark's z
   EXPECT_EQ(huge.largestMagnitude(), 1e13);
   EXPECT_EQ(nan.largestMagnitude(), 3.0);  // NaN skipped
+  EXPECT_EQ(inf.largestMagnitude(), std::numeric_limits<double>::infinity());
+  nan.data(1)[0] = -std::numeric_limits<double>::quiet_NaN();  // sign bit set too
+  EXPECT_EQ(nan.largestMagnitude(), 3.0);
+  EXPECT_EQ(Values().largestMagnitude(), 0.0);
 }
 
 TEST(Values, SetInsertFromAssignFrom) {
