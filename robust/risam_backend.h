@@ -203,6 +203,14 @@ struct RisamOptions {
   /// basin is 4.6% cheaper at the gate, and the optimum). Costs one batch GNC per such
   /// optimize(); without outliers the answer rejects nothing and it does not run.
   bool gncLook = true;
+  /// After a GNC look, optimize() looks again only once there are at least gncLookGrowth
+  /// times as many uncertain factors as that look saw. The server optimizes at every input
+  /// pause, and one look costs a batch `gnc-tls` over the whole graph (parking-garage + 100
+  /// random wrong closures: 28 s against 0.5 s for the rest of optimize()); growing
+  /// geometrically, the looks of a whole stream cost about 1/(1 − 1/gncLookGrowth) times the
+  /// last one. A run with one optimize() (loopd-solve) always looks. ≤ 1: at every
+  /// optimize() whose answer rejects anything.
+  double gncLookGrowth = 1.5;
 };
 
 class RisamBackend : public DecoratorBackend {
@@ -242,7 +250,7 @@ class RisamBackend : public DecoratorBackend {
   int batchGateChecks() const { return batchGateChecks_; }
   int batchGatesAdopted() const { return batchGatesAdopted_; }
   /// optimize() calls that looked at a batch GNC's answer, and those that kept it
-  /// (RisamOptions::gncLook).
+  /// (RisamOptions::gncLook, gncLookGrowth).
   int gncLooks() const { return gncLooks_; }
   int gncLooksKept() const { return gncLooksKept_; }
   static constexpr FactorId kInternalIdBit = FactorId{1} << 63;
@@ -382,6 +390,7 @@ class RisamBackend : public DecoratorBackend {
   int batchGatesAdopted_ = 0;
   int gncLooks_ = 0;
   int gncLooksKept_ = 0;
+  size_t gncLookAtCount_ = 0;         // uncertain factors at the last GNC look (0: none yet)
   bool onlineGateChecked_ = false;    // the first gate with gateMinSamples was checked
   size_t smallGateCheckAtCount_ = 0;  // uncertain factors at the last check below them
   bool refeeding_ = false;            // refeedSingly: the factors are in originals_ already

@@ -69,6 +69,10 @@ void RisamBackend::optimize() {
 // Judged at the gate like the second looks; a kept answer is then decided against the tail.
 void RisamBackend::tryGncLook() {
   if (!options_.gncLook || !innerIsam2_) return;
+  if (gncLookAtCount_ > 0 && static_cast<double>(graduated_.size()) <
+                                 options_.gncLookGrowth * static_cast<double>(gncLookAtCount_))
+    return;
+  gncLookAtCount_ = graduated_.size();
   ++gncLooks_;
   atTail_ = false;
   const Answer before = answer();

@@ -1,7 +1,7 @@
 // The pairwise-consistency (PCM) selection: on a noisy trajectory that circles a square three
 // times, the true revisits form one mutually consistent set and wrong closures do not join
-// it, in 2D and 3D; the scales and the short-cycle calibration set the test's width; a
-// closure nothing agrees with stays out.
+// it, in 2D and 3D; the scales and the short-cycle calibration set the test's width; a pair
+// is judged exactly at the gate; a closure nothing agrees with stays out.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -9,6 +9,7 @@
 #include <random>
 
 #include "robust/pairwise_consistency.h"
+#include "robust/robust_factors.h"
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
 #include "solvers/geometry/so3.h"
@@ -157,6 +158,40 @@ TEST(PairwiseConsistency, ShortCyclesCalibrateUnderConfidentInformation) {
   int trueIn = 0;
   for (int i : s.trueClosures) trueIn += set.member[i];
   EXPECT_GE(trueIn, static_cast<int>(0.9 * s.trueClosures.size()));
+}
+
+// Two closures with the same ends (poses 0 and 2, at one place, so no lever arm and no chain
+// between them): the cycle is z_j⁻¹·z_i, and the statistic is d²/(σ_t,i² + σ_t,j²) for a
+// translation d apart and θ²/(σ_r,i² + σ_r,j²) for a rotation θ apart. Within a millionth
+// below the χ²₃(0.999) gate they agree, above it they do not, either way (each term is
+// checked alone first, the rotation's with sin θ before the atan2).
+TEST(PairwiseConsistency, JudgesAPairAtTheGateByTranslationAndByRotation) {
+  const Eigen::Matrix3d information = Eigen::Vector3d(100.0, 100.0, 1e4).asDiagonal();
+  const double gate = chi2Quantile(3, 0.999);
+  const double dGate = std::sqrt(gate * 2.0 * 0.01), thetaGate = std::sqrt(gate * 2.0 * 1e-4);
+  auto pairSize = [&](const SE2& apart) {
+    FactorGraph g;
+    Values odometry;
+    odometry.insert(poseKey(0), SE2());
+    odometry.insert(poseKey(1), SE2(1.0, 0.0, 0.0));
+    odometry.insert(poseKey(2), SE2());
+    g.add(std::make_shared<BetweenFactorSE2>(poseKey(0), poseKey(1), SE2(1.0, 0.0, 0.0),
+                                             information, FactorRole::Odometry));
+    g.add(std::make_shared<BetweenFactorSE2>(poseKey(1), poseKey(2), SE2(-1.0, 0.0, 0.0),
+                                             information, FactorRole::Odometry));
+    g.add(std::make_shared<BetweenFactorSE2>(poseKey(0), poseKey(2), SE2(), information,
+                                             FactorRole::LoopClosure));
+    g.add(std::make_shared<BetweenFactorSE2>(poseKey(0), poseKey(2), apart, information,
+                                             FactorRole::LoopClosure));
+    ConsistencyOptions o;
+    o.calibrationWindow = 0;
+    return pairwiseConsistentClosures(g, odometry, o).size;
+  };
+  EXPECT_EQ(pairSize(SE2(dGate * (1.0 - 1e-6), 0.0, 0.0)), 2);
+  EXPECT_EQ(pairSize(SE2(dGate * (1.0 + 1e-6), 0.0, 0.0)), 1);
+  EXPECT_EQ(pairSize(SE2(0.0, 0.0, thetaGate * (1.0 - 1e-6))), 2);
+  EXPECT_EQ(pairSize(SE2(0.0, 0.0, thetaGate * (1.0 + 1e-6))), 1);
+  EXPECT_EQ(pairSize(SE2(0.0, 0.0, 1.0)), 1);  // far out: sin θ alone settles it
 }
 
 // A closure to a pose off the chain (a second robot's, without odometry) has no partner to

@@ -42,6 +42,23 @@ std::unique_ptr<RisamBackend> makeRisam(RisamOptions options, Isam2Backend** isa
   return std::make_unique<RisamBackend>(std::move(inner), options);
 }
 
+// Step i of p's incremental schedule into b, as loopd-solve --incremental feeds it; true if
+// it brought a loop closure.
+bool feedStep(const PoseGraphProblem& p, const std::vector<IncrementalStep>& steps, size_t i,
+              Backend& b) {
+  BackendUpdate u;
+  bool closure = false;
+  for (int f : steps[i].factors) {
+    u.factors.push_back(p.graph[f]);
+    closure = closure || p.graph[f]->role() == FactorRole::LoopClosure;
+  }
+  if (!b.estimate().contains(steps[i].pose) && (i == 0 || u.factors.empty()))
+    u.initial.insertFrom(p.initial, p.initial.slot(steps[i].pose));
+  EXPECT_TRUE(predictMissingValues(u.factors, b.estimate(), u.initial));
+  b.update(u);
+  return closure;
+}
+
 OnlineCounts runOnline(const PoseGraphProblem& p, RisamBackend* given = nullptr,
                        size_t* treeBytesOnline = nullptr, Isam2Backend* isam = nullptr) {
   const std::unique_ptr<Backend> backend = given ? nullptr : makeBackend("risam");
@@ -49,16 +66,7 @@ OnlineCounts runOnline(const PoseGraphProblem& p, RisamBackend* given = nullptr,
   OnlineCounts c;
   const auto steps = incrementalSchedule(p);
   for (size_t i = 0; i < steps.size(); ++i) {
-    BackendUpdate u;
-    bool closure = false;
-    for (int f : steps[i].factors) {
-      u.factors.push_back(p.graph[f]);
-      closure = closure || p.graph[f]->role() == FactorRole::LoopClosure;
-    }
-    if (!b.estimate().contains(steps[i].pose) && (i == 0 || u.factors.empty()))
-      u.initial.insertFrom(p.initial, p.initial.slot(steps[i].pose));
-    EXPECT_TRUE(predictMissingValues(u.factors, b.estimate(), u.initial));
-    b.update(u);
+    const bool closure = feedStep(p, steps, i, b);
     ++c.updates;
     c.closureUpdates += closure ? 1 : 0;
     c.innerUpdates += b.lastInnerUpdates();
@@ -550,6 +558,47 @@ TEST(RisamFinal, TakesNoSecondLooksWhenTheAnswerRejectsNothing) {
   EXPECT_GT(co.rejectedFinal, 0u);
   EXPECT_EQ(o->secondLooks(), 1);
   EXPECT_EQ(o->gncLooks(), 1);
+}
+
+// The server optimizes at every input pause: intel's first 300 poses + local outliers (seed 2)
+// with an optimize() every 20 poses. With the default gncLookGrowth the GNC look runs at the
+// first optimize() that rejects anything and then only once the uncertain factors have grown
+// by that factor since the last look; with 1, at every optimize() that rejects anything.
+TEST(RisamFinal, LooksAgainOnlyOnceTheClosuresGrew) {
+  const PoseGraphProblem p = withOutliers("intel.g2o", 1000, tools::OutlierMode::Local, 2, 300);
+  const auto steps = incrementalSchedule(p);
+  for (const double growth : {1.5, 1.0}) {
+    RisamOptions o;
+    o.gncLookGrowth = growth;
+    const std::unique_ptr<RisamBackend> b = makeRisam(o);
+    size_t uncertain = 0, lookedAt = 0;
+    int pausesRejecting = 0;
+    for (size_t i = 0; i < steps.size(); ++i) {
+      feedStep(p, steps, i, *b);
+      for (int f : steps[i].factors) uncertain += isUncertain(p.graph[f]->role()) ? 1 : 0;
+      if (i % 20 != 19 && i + 1 != steps.size()) continue;
+      const int looks = b->gncLooks();
+      b->optimize();
+      if (b->rejected().empty()) {
+        EXPECT_EQ(b->gncLooks(), looks) << "at pose " << i;
+        continue;
+      }
+      ++pausesRejecting;
+      const bool due = lookedAt == 0 || static_cast<double>(uncertain) >= growth * lookedAt;
+      EXPECT_EQ(b->gncLooks(), looks + (due ? 1 : 0)) << "growth " << growth << " at pose " << i;
+      if (due) lookedAt = uncertain;
+    }
+    std::printf(
+        "[risam] intel:300 + local (seed 2), optimize() every 20 poses, gncLookGrowth "
+        "%.1f: %d looks at %d optimize() calls that reject something\n",
+        growth, b->gncLooks(), pausesRejecting);
+    if (growth > 1.0) {
+      EXPECT_GT(b->gncLooks(), 1);  // it does look again
+      EXPECT_LT(b->gncLooks(), pausesRejecting);
+    } else {
+      EXPECT_EQ(b->gncLooks(), pausesRejecting);
+    }
+  }
 }
 
 // parking-garage's first 500 poses with the wrong closures loopd-outliers puts among them:
