@@ -206,7 +206,7 @@ struct RisamOptions {
   /// After a GNC look, optimize() looks again only once there are at least gncLookGrowth
   /// times as many uncertain factors as that look saw. The server optimizes at every input
   /// pause, and one look costs a batch `gnc-tls` over the whole graph (parking-garage + 100
-  /// random wrong closures: 28 s against 0.5 s for the rest of optimize()); growing
+  /// random wrong closures: 22–28 s against 0.5 s for the rest of optimize()); growing
   /// geometrically, the looks of a whole stream cost about 1/(1 − 1/gncLookGrowth) times the
   /// last one. A run with one optimize() (loopd-solve) always looks. ≤ 1: at every
   /// optimize() whose answer rejects anything.
