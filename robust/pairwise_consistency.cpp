@@ -203,9 +203,10 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values&
     if (!cycleOf(i, j, c)) return std::numeric_limits<double>::infinity();
     return translationTerm(c) + rotationTerm(c, rotationSine(c.delta.R));
   };
-  // cycle(i, j) < threshold, with the same bits where it is computed, but without the atan2
-  // (two thirds of the time) where the translation term alone, or with the angle's lower
-  // bound θ ≥ sin θ, already reaches the threshold (the margin covers sin θ's rounding).
+  // cycle(i, j) < threshold, with the same bits where it is computed, but without the angle's
+  // atan2 where the translation term alone, or with its lower bound θ ≥ sin θ, already
+  // reaches the threshold (the margin covers sin θ's rounding). 3.7–6.3× faster than
+  // computing every statistic, with the same sets (robust/README, thirty-fourth session).
   auto consistent = [&](int i, int j, double threshold) {
     Cycle c;
     if (!cycleOf(i, j, c)) return false;
