@@ -109,6 +109,7 @@ std::vector<Entry>& registry() {
        [](const BackendOptions& o) {
          RisamOptions r;
          if (o.robustParameter > 0.0) r.shape = o.robustParameter;
+         r.interrupt = o.interrupt;
          Isam2Options isam;
          isam.urgentRelinearizeThreshold = 1.0;
          return std::make_unique<RisamBackend>(robustInner(o, isam), r);

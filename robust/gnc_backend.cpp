@@ -10,7 +10,16 @@
 namespace loopd {
 
 GncBackend::GncBackend(BackendOptions options, GncOptions gnc)
-    : BatchBackend(std::move(options)), gnc_(gnc) {}
+    : BatchBackend(std::move(options)), gnc_(std::move(gnc)) {
+  // Every solve reports each iteration (BatchBackend hands progress to its optimizer): the
+  // interrupt is asked there.
+  if (gnc_.interrupt)
+    options_.progress = [report = std::move(options_.progress),
+                         interrupt = gnc_.interrupt](const IterationReport& r) {
+      if (report) report(r);
+      if (interrupt()) throw GncInterrupted();
+    };
+}
 
 std::string GncBackend::name() const {
   return gnc_.loss == GncLoss::GemanMcClure ? "gnc-gm" : "gnc-tls";

@@ -12,6 +12,8 @@
 //        stop when every weight is within 1e-4 of 0 or 1; return at once if all r² ≤ c̄².
 //   Both: stop when the weighted cost changes by less than 1e-5 relatively, or after 100
 //   outer steps.
+#include <functional>
+#include <stdexcept>
 #include <vector>
 
 #include "solvers/batch/batch_backend.h"
@@ -110,6 +112,16 @@ struct GncOptions {
   int admitWindow = 50;
   int dropWindow = 10;
   int maxCluster = 20;
+  /// Asked at every Levenberg–Marquardt iteration and at every closure's row of the
+  /// consistent-set test; true makes optimize() throw GncInterrupted (RisamBackend's GNC look,
+  /// which then leaves its answer as it was). Unset: never.
+  std::function<bool()> interrupt;
+};
+
+/// Thrown out of GncBackend::update()/optimize() when GncOptions::interrupt returns true; the
+/// backend's estimate and weights are then partway.
+struct GncInterrupted : std::runtime_error {
+  GncInterrupted() : std::runtime_error("gnc: interrupted") {}
 };
 
 /// Noise scale and tail gate of normalized χ² values q_i = χ²_i/χ²_{dim_i}(0.5): scale = the

@@ -247,9 +247,11 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values&
   }
   out.calibration = calibration;
   const double threshold = gate * calibration;
-  for (int i = 0; i < m; ++i)
+  for (int i = 0; i < m; ++i) {
+    if (options.checkpoint) options.checkpoint();
     for (int j = i + 1; j < m; ++j)
       if (consistent(i, j, threshold)) connect(i, j);
+  }
 
   std::vector<int> order(m);
   std::iota(order.begin(), order.end(), 0);

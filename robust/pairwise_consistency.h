@@ -12,6 +12,7 @@
 //
 // Only pose–pose between closures whose four ends lie on one unbroken odometry chain are
 // judged; the rest (landmarks, closures across robots or chain breaks) are left out.
+#include <functional>
 #include <vector>
 
 #include "solvers/core/values.h"
@@ -30,6 +31,9 @@ struct ConsistencyOptions {
   /// many poses long (0: off); used when there are at least minCalibrationPairs of them.
   int calibrationWindow = 5;
   int minCalibrationPairs = 30;
+  /// Called before each closure's row of pair tests (the O(closures²) part); may throw to
+  /// give the test up (GncOptions::interrupt).
+  std::function<void()> checkpoint;
 };
 
 struct ConsistentSet {

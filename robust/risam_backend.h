@@ -16,6 +16,7 @@
 // χ² test χ² > χ²_dim(0.95) at the current estimate (a weight threshold would depend on c).
 // Shape c: √χ²_dim(0.95) per factor dimension by default (2.80 for SE2, 3.55 for SE3; the
 // paper's c = 3 was for 2D), or BackendOptions::robustParameter for every factor.
+#include <functional>
 #include <memory>
 #include <unordered_map>
 #include <unordered_set>
@@ -211,6 +212,11 @@ struct RisamOptions {
   /// last one. A run with one optimize() (loopd-solve) always looks. ≤ 1: at every
   /// optimize() whose answer rejects anything.
   double gncLookGrowth = 1.5;
+  /// Asked at every iteration of the GNC look's solves and while its consistent-set test
+  /// runs; true gives the look up: the answer stays as it was before it, and the next
+  /// optimize() looks again. The server sets it (BackendOptions::interrupt) to "input is
+  /// waiting, or the server stops", so a pause's look never holds new data back. Unset: never.
+  std::function<bool()> interrupt;
 };
 
 class RisamBackend : public DecoratorBackend {
@@ -250,9 +256,11 @@ class RisamBackend : public DecoratorBackend {
   int batchGateChecks() const { return batchGateChecks_; }
   int batchGatesAdopted() const { return batchGatesAdopted_; }
   /// optimize() calls that looked at a batch GNC's answer, and those that kept it
-  /// (RisamOptions::gncLook, gncLookGrowth).
+  /// (RisamOptions::gncLook, gncLookGrowth); looks given up (RisamOptions::interrupt) are
+  /// counted apart.
   int gncLooks() const { return gncLooks_; }
   int gncLooksKept() const { return gncLooksKept_; }
+  int gncLooksInterrupted() const { return gncLooksInterrupted_; }
   static constexpr FactorId kInternalIdBit = FactorId{1} << 63;
 
  private:
@@ -311,8 +319,9 @@ class RisamBackend : public DecoratorBackend {
   void gateDirection(double gate, bool& wider, bool& tighter) const;
   void refreshGate();
   /// A batch `gnc-tls` (GncBackend, its defaults) over the graph so far, started from the
-  /// estimate; null if it threw or its solution is not finite.
-  std::unique_ptr<GncBackend> solveBatchGnc() const;
+  /// estimate; null if it threw or its solution is not finite. With `interrupt`, throws
+  /// GncInterrupted when that returns true.
+  std::unique_ptr<GncBackend> solveBatchGnc(const std::function<bool()>& interrupt = {}) const;
   /// RisamOptions::batchGateCheck: true if the GNC's tight gate and solution were taken.
   bool adoptBatchGate();
   /// RisamOptions::gncLook (needs an inner iSAM2).
@@ -390,6 +399,7 @@ class RisamBackend : public DecoratorBackend {
   int batchGatesAdopted_ = 0;
   int gncLooks_ = 0;
   int gncLooksKept_ = 0;
+  int gncLooksInterrupted_ = 0;
   size_t gncLookAtCount_ = 0;         // uncertain factors at the last GNC look (0: none yet)
   bool onlineGateChecked_ = false;    // the first gate with gateMinSamples was checked
   size_t smallGateCheckAtCount_ = 0;  // uncertain factors at the last check below them

@@ -79,14 +79,18 @@ void RisamBackend::refreshGate() {
   }
 }
 
-std::unique_ptr<GncBackend> RisamBackend::solveBatchGnc() const {
-  auto gnc = std::make_unique<GncBackend>(BackendOptions{}, GncOptions{});
+std::unique_ptr<GncBackend> RisamBackend::solveBatchGnc(
+    const std::function<bool()>& interrupt) const {
+  GncOptions go;
+  go.interrupt = interrupt;
+  auto gnc = std::make_unique<GncBackend>(BackendOptions{}, go);
   BackendUpdate all;
   all.initial = inner_->estimate();
   for (const auto& f : originals_.factors()) all.factors.push_back(f);
   try {
-    gnc->update(all);
-    gnc->optimize();
+    gnc->update(all);  // solves: a batch backend's update() runs its optimize()
+  } catch (const GncInterrupted&) {
+    throw;
   } catch (const std::exception&) {
     return nullptr;  // a look that cannot run leaves the answer as it was
   }

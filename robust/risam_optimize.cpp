@@ -72,11 +72,19 @@ void RisamBackend::tryGncLook() {
   if (gncLookAtCount_ > 0 && static_cast<double>(graduated_.size()) <
                                  options_.gncLookGrowth * static_cast<double>(gncLookAtCount_))
     return;
-  gncLookAtCount_ = graduated_.size();
-  ++gncLooks_;
   atTail_ = false;
   const Answer before = answer();
-  const std::unique_ptr<GncBackend> gnc = solveBatchGnc();
+  std::unique_ptr<GncBackend> gnc;
+  try {
+    gnc = solveBatchGnc(options_.interrupt);
+  } catch (const GncInterrupted&) {
+    // Nothing was changed yet; the look is due again at the next optimize().
+    ++gncLooksInterrupted_;
+    atTail_ = tight_;
+    return;
+  }
+  gncLookAtCount_ = graduated_.size();
+  ++gncLooks_;
   bool kept = false;
   if (gnc) {
     innerIsam2_->resetEstimate(gnc->estimate());

@@ -26,6 +26,9 @@ Engine::~Engine() = default;
 BackendOptions Engine::backendOptions() const {
   BackendOptions bo;
   bo.maxHypotheses = opt_.maxHypotheses;
+  // Long optimize() work that can be given up (risam's GNC look at a pause) yields to input
+  // and to a stop.
+  bo.interrupt = [this] { return queueDepth() > 0 || (stop_ && stop_->load()); };
   return bo;
 }
 
@@ -184,6 +187,7 @@ void Engine::idle() {
 }
 
 void Engine::run(const std::atomic<bool>& stop) {
+  stop_ = &stop;
   while (!stop.load()) {
     {
       std::unique_lock<std::mutex> l(qmu_);
@@ -196,6 +200,7 @@ void Engine::run(const std::atomic<bool>& stop) {
   // Finish what arrived, then leave the journal flushed.
   while (step()) {
   }
+  stop_ = nullptr;
   if (journal_) journal_->flush();
 }
 

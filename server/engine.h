@@ -237,7 +237,8 @@ class Engine : private GraphView {
   std::int64_t updateSeq_ = 0;
   std::int64_t updatesSinceSnapshot_ = 0;
   double lastUpdateMs_ = 0.0, sumUpdateMs_ = 0.0;
-  bool dirty_ = false;  // updated since the last optimize()
+  bool dirty_ = false;                       // updated since the last optimize()
+  const std::atomic<bool>* stop_ = nullptr;  // run()'s stop flag, while it runs
   bool replaying_ = false;
   std::chrono::steady_clock::time_point lastInput_, lastStatus_;
   mutable std::mutex countersMu_;

@@ -67,6 +67,10 @@ struct BackendOptions {
   /// mh: live hypotheses kept at most (K).
   int maxHypotheses = 10;
   std::function<void(const IterationReport&)> progress;
+  /// Asked during long optimize() work that can be given up without losing anything (today
+  /// only `risam`'s GNC look, RisamOptions::interrupt); true gives it up, and the answer stays
+  /// as it was before that work. The server: input is waiting, or it is stopping.
+  std::function<bool()> interrupt;
 };
 
 class Backend {

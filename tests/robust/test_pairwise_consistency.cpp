@@ -7,6 +7,7 @@
 #include <cmath>
 #include <memory>
 #include <random>
+#include <stdexcept>
 
 #include "robust/pairwise_consistency.h"
 #include "robust/robust_factors.h"
@@ -118,6 +119,25 @@ void expectTrueSetFound(bool in3d) {
 TEST(PairwiseConsistency, KeepsTheTrueRevisitsAndNoWrongClosure2D) { expectTrueSetFound(false); }
 
 TEST(PairwiseConsistency, KeepsTheTrueRevisitsAndNoWrongClosure3D) { expectTrueSetFound(true); }
+
+// The checkpoint (GncOptions::interrupt) is called once per judged closure, before its row of
+// pair tests, leaves the set as it is when it returns, and gives the test up when it throws.
+TEST(PairwiseConsistency, CallsItsCheckpointPerClosureAndIsGivenUpByIt) {
+  const Scenario s = square(WalkSetup{});
+  const ConsistentSet plain = pairwiseConsistentClosures(s.graph, s.odometry);
+  ConsistencyOptions o;
+  int calls = 0;
+  o.checkpoint = [&] { ++calls; };
+  const ConsistentSet watched = pairwiseConsistentClosures(s.graph, s.odometry, o);
+  EXPECT_EQ(calls, plain.judged);
+  EXPECT_EQ(watched.member, plain.member);
+  calls = 0;
+  o.checkpoint = [&] {
+    if (++calls == 3) throw std::runtime_error("given up");
+  };
+  EXPECT_THROW(pairwiseConsistentClosures(s.graph, s.odometry, o), std::runtime_error);
+  EXPECT_EQ(calls, 3);
+}
 
 // The stated uncertainty decides: a closure 1.5 m off is inconsistent with the revisits near
 // it under the stated information, and joins them once odometry and closures are declared

@@ -310,6 +310,35 @@ TEST(GncOdometryStart, EscapesTheMinimumGroupsBendTheStartInto) {
   expectExact(r.on, ref);
 }
 
+// GncOptions::interrupt (RisamBackend's GNC look under the server) is asked as the GNC works,
+// at every iteration of its solves and at every closure of its consistent-set test; "no"
+// changes nothing, bit for bit, and "yes" at any of those points throws GncInterrupted.
+TEST(GncInterrupt, AskedAsItWorksAndThrowsWhenToldTo) {
+  const Reference& ref = reference("intel.g2o");
+  const tools::OutlierResult data = protocolOutliers(ref, 100, OutlierMode::Random);
+  const PoseGraphProblem p = buildProblem(data.graph);
+  GncBackend plain(BackendOptions{}, GncOptions{});
+  plain.update(wholeProblemUpdate(p));
+  int asked = 0;
+  GncOptions g;
+  g.interrupt = [&] {
+    ++asked;
+    return false;
+  };
+  GncBackend watched(BackendOptions{}, g);
+  watched.update(wholeProblemUpdate(p));
+  EXPECT_GT(asked, 100);
+  EXPECT_EQ(watched.chi2(), plain.chi2());
+  EXPECT_EQ(watched.rejected(), plain.rejected());
+  for (const int at : {1, asked / 2, asked}) {
+    int n = 0;
+    g.interrupt = [&] { return ++n == at; };
+    GncBackend b(BackendOptions{}, g);
+    EXPECT_THROW(b.update(wholeProblemUpdate(p)), GncInterrupted) << "at question " << at;
+    EXPECT_EQ(n, at);
+  }
+}
+
 // With 1000 outliers in groups of 10 on intel (seed 1), the groups bend the map from both the
 // least-squares and the odometry start (recall 0.95, ATE 11 m, truncated cost 12208 against
 // the truth's 11390). The largest pairwise-consistent set of closures (PCM) holds 783 of

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -570,6 +572,96 @@ TEST(Engine, RefusesARoundThatMakesTheSolverDiverge) {
   for (size_t e = published; e < f.out.estimates.size(); ++e)
     for (const auto& pose : f.out.estimates[e].poses)
       for (double v : pose) EXPECT_TRUE(std::isfinite(v));
+}
+
+// "isam2" whose optimize() stands for a long piece of work that can be given up (risam's GNC
+// look): it waits until BackendOptions::interrupt says so, at most 20 s, and records what it
+// saw.
+struct Yielding {
+  static inline std::atomic<int> optimizes{0}, interrupted{0};
+  static inline std::atomic<bool> hadInterrupt{false};
+};
+class YieldingBackend : public DecoratorBackend {
+ public:
+  explicit YieldingBackend(const BackendOptions& o)
+      : DecoratorBackend(std::make_unique<Isam2Backend>(), "YieldingBackend"),
+        interrupt_(o.interrupt) {
+    Yielding::hadInterrupt = static_cast<bool>(interrupt_);
+  }
+  std::string name() const override { return "yielding"; }
+  UpdateResult update(const BackendUpdate& u) override {
+    const UpdateResult r = inner_->update(u);
+    commitOriginals(u, {u.removals.begin(), u.removals.end()});
+    return r;
+  }
+  void optimize() override {
+    ++Yielding::optimizes;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (std::chrono::steady_clock::now() < until) {
+      if (interrupt_ && interrupt_()) {
+        ++Yielding::interrupted;
+        return;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+  }
+
+ private:
+  std::function<bool()> interrupt_;
+};
+
+// The idle optimize gives way: a message that arrives while it runs, or a stop, ends work
+// that asks BackendOptions::interrupt (risam's GNC look at a pause) at once, instead of
+// holding the input back until it is done.
+TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
+  static const bool registered = [] {
+    registerBackend({"yielding", "test: optimize() waits for the interrupt", true},
+                    [](const BackendOptions& o) { return std::make_unique<YieldingBackend>(o); });
+    return true;
+  }();
+  ASSERT_TRUE(registered);
+  EngineOptions o = EngineFixture::options("yielding", 30);
+  o.idleSeconds = 0;
+  Publisher pub(Channels::withPrefix("T_"), [](const std::string&, const std::vector<uint8_t>&) {});
+  Engine engine(o, pub, nullptr);
+  ASSERT_TRUE(Yielding::hadInterrupt);
+  std::int64_t seq = 0, id = 0;
+  auto send = [&](int from) {
+    engine.post({"T_FACTORS",
+                 encode(batch("r0", ++seq, {between2(id++, 0, from, 0, from + 1, {1, 0, 0.1})}))});
+  };
+  send(0);
+  ASSERT_TRUE(engine.step());
+  // Input while the idle optimize runs.
+  const int optimizesBefore = Yielding::optimizes;
+  const auto t0 = std::chrono::steady_clock::now();
+  std::thread poster([&] {
+    while (Yielding::optimizes == optimizesBefore) std::this_thread::yield();
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    send(1);
+  });
+  engine.idle();
+  poster.join();
+  const double waited =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(Yielding::interrupted, 1);
+  EXPECT_LT(waited, 10.0);
+  EXPECT_EQ(engine.queueDepth(), 1);
+  ASSERT_TRUE(engine.step());  // the waiting pose goes in
+  EXPECT_EQ(engine.backend().estimate().size(), 3);
+  // A stop while run()'s idle optimize runs.
+  std::atomic<bool> stop{false};
+  const int interruptedBefore = Yielding::interrupted;
+  std::thread stopper([&] {
+    while (Yielding::optimizes == optimizesBefore + 1) std::this_thread::yield();
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    stop = true;
+  });
+  const auto t1 = std::chrono::steady_clock::now();
+  engine.run(stop);
+  stopper.join();
+  EXPECT_EQ(Yielding::interrupted, interruptedBefore + 1);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count(), 10.0);
 }
 
 // A solver that runs away need not pass through NaN (riSAM on parking-garage went from 1e3 to
