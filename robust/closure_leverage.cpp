@@ -82,7 +82,9 @@ std::vector<double> predictedCostChange(const FactorGraph& graph, const Values& 
   std::vector<Eigen::MatrixXd> sigma;
   try {
     sigma = marginals(keySets);
-  } catch (const std::exception&) {
+  } catch (const std::runtime_error&) {  // singular at the estimate: cannot be told
+    return out;
+  } catch (const std::logic_error&) {  // a variable it does not know
     return out;
   }
   for (size_t a = 0; a < asked.size() && a < sigma.size(); ++a) {

@@ -25,7 +25,8 @@ enum class GroupChange { Add, Remove };
 
 /// For each group (factor indices into graph): the predicted cost rise on adding it (Add) or
 /// cost drop on removing it (Remove), both ≥ 0; NaN where it cannot be told (a variable
-/// missing from values, failed marginals, a singular system).
+/// missing from values, marginals failing with a runtime_error or logic_error, a singular
+/// system). Other exceptions from marginals (a caller giving up) pass.
 std::vector<double> predictedCostChange(const FactorGraph& graph, const Values& values,
                                         const std::vector<std::vector<int>>& groups,
                                         GroupChange change, const JointMarginalsFn& marginals);

@@ -15,10 +15,17 @@ GncBackend::GncBackend(BackendOptions options, GncOptions gnc)
   // interrupt is asked there.
   if (gnc_.interrupt)
     options_.progress = [report = std::move(options_.progress),
-                         interrupt = gnc_.interrupt](const IterationReport& r) {
+                         checkpoint = interruptCheckpoint()](const IterationReport& r) {
       if (report) report(r);
-      if (interrupt()) throw GncInterrupted();
+      checkpoint();
     };
+}
+
+std::function<void()> GncBackend::interruptCheckpoint() const {
+  if (!gnc_.interrupt) return {};
+  return [interrupt = gnc_.interrupt] {
+    if (interrupt()) throw GncInterrupted();
+  };
 }
 
 std::string GncBackend::name() const {

@@ -112,16 +112,18 @@ struct GncOptions {
   int admitWindow = 50;
   int dropWindow = 10;
   int maxCluster = 20;
-  /// Asked at every Levenberg–Marquardt iteration and at every closure's row of the
-  /// consistent-set test; true makes optimize() throw GncInterrupted (RisamBackend's GNC look,
-  /// which then leaves its answer as it was). Unset: never.
+  /// Asked at every Levenberg–Marquardt iteration, at every closure's row of the
+  /// consistent-set test and before every group's joint marginal in the checks; true makes
+  /// optimize() throw GncInterrupted (RisamBackend's GNC look, which then leaves its answer as it
+  /// was). Unset: never.
   std::function<bool()> interrupt;
 };
 
 /// Thrown out of GncBackend::update()/optimize() when GncOptions::interrupt returns true; the
-/// backend's estimate and weights are then partway.
-struct GncInterrupted : std::runtime_error {
-  GncInterrupted() : std::runtime_error("gnc: interrupted") {}
+/// backend's estimate and weights are then partway. Not a runtime_error or logic_error: the
+/// handlers of failures inside (a singular marginal is "cannot be told") let it pass.
+struct GncInterrupted : std::exception {
+  const char* what() const noexcept override { return "gnc: interrupted"; }
 };
 
 /// Noise scale and tail gate of normalized χ² values q_i = χ²_i/χ²_{dim_i}(0.5): scale = the
@@ -158,6 +160,8 @@ class GncBackend : public BatchBackend {
   class Run;  // one optimize() call (robust/gnc_run.h)
 
   double barc2(const Factor& f) const;
+  /// Throws GncInterrupted if GncOptions::interrupt says so; empty without an interrupt.
+  std::function<void()> interruptCheckpoint() const;
   /// The trusted factors' linear initialization from the lowest pose (the odometry start);
   /// empty without a pose or a trusted factor. alsoUse: per factor, uncertain ones to use too.
   Values trustedLinearStart(const std::vector<char>& alsoUse = {}) const;

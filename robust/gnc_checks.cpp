@@ -141,10 +141,7 @@ void GncBackend::Run::tryConsistentStart() {
   c2_ = gate_;
   ConsistencyOptions pcm;
   pcm.probability = gnc_.consistencyProbability;
-  if (gnc_.interrupt)
-    pcm.checkpoint = [this] {
-      if (gnc_.interrupt()) throw GncInterrupted();
-    };
+  pcm.checkpoint = b_.interruptCheckpoint();
   std::vector<double> qOdometry, qClosures;
   for (int i = 0; i < n_; ++i) {
     const double q = (cbar_[i] > 0.0 ? r2_[i] : graph_[i]->chi2(estimate_)) / half_[i];

@@ -32,8 +32,9 @@ GncBackend::Run::Run(GncBackend& backend, Values odometryStart)
     half_[i] = chi2Quantile(std::max(graph_[i]->dim(), 1), 0.5);
     if (isUncertain(graph_[i]->role())) c2_[i] = b_.barc2(*graph_[i]), anyUncertain_ = true;
   }
-  jointMarginal_ = [this](const std::vector<std::vector<Key>>& sets) {
-    return b_.jointMarginals(sets);
+  jointMarginal_ = [this, checkpoint =
+                              b_.interruptCheckpoint()](const std::vector<std::vector<Key>>& sets) {
+    return b_.jointMarginals(sets, checkpoint);
   };
   b_.outer_ = 0;
   b_.scale_ = 0.0;

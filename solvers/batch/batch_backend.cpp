@@ -103,8 +103,8 @@ Eigen::MatrixXd BatchBackend::marginalCovariance(const std::vector<Key>& keys) {
 }
 
 std::vector<Eigen::MatrixXd> BatchBackend::jointMarginals(
-    const std::vector<std::vector<Key>>& keySets) {
-  return loopd::jointMarginals(optimizer(), estimate_, keySets, factorWeights());
+    const std::vector<std::vector<Key>>& keySets, const std::function<void()>& beforeEachSet) {
+  return loopd::jointMarginals(optimizer(), estimate_, keySets, factorWeights(), beforeEachSet);
 }
 
 std::vector<Eigen::MatrixXd> BatchBackend::marginals(const std::vector<Key>& keys) {

@@ -2,6 +2,7 @@
 // The batch Backend ("gn", "lm", "dogleg"): keeps the whole graph and re-solves it from the
 // current estimate after each update. The symbolic factorization is reused until the graph's
 // structure changes. Without any prior, the lowest pose is held fixed (the gauge).
+#include <functional>
 #include <unordered_map>
 
 #include "solvers/backend/backend.h"
@@ -22,8 +23,10 @@ class BatchBackend : public Backend {
 
   /// Many keys at once, chunked column solves on one factorization.
   std::vector<Eigen::MatrixXd> marginals(const std::vector<Key>& keys) override;
-  /// The joint marginal of each key set, all on one factorization.
-  std::vector<Eigen::MatrixXd> jointMarginals(const std::vector<std::vector<Key>>& keySets);
+  /// The joint marginal of each key set, all on one factorization (beforeEachSet: as
+  /// loopd::jointMarginals).
+  std::vector<Eigen::MatrixXd> jointMarginals(const std::vector<std::vector<Key>>& keySets,
+                                              const std::function<void()>& beforeEachSet = {});
 
  protected:
   /// Robust subclasses: per-factor weights for the next solve (nullptr: all ones).

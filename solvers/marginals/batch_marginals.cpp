@@ -73,13 +73,17 @@ Eigen::MatrixXd jointMarginal(NonlinearOptimizer& opt, const Values& values,
 
 std::vector<Eigen::MatrixXd> jointMarginals(NonlinearOptimizer& opt, const Values& values,
                                             const std::vector<std::vector<Key>>& keySets,
-                                            const double* weights) {
+                                            const double* weights,
+                                            const std::function<void()>& beforeEachSet) {
   // Factorize first: the layout (and so the offsets) follows the weights (fitPattern).
   factorOrThrow(opt, values, weights);
   std::vector<KeyColumns> located;
   for (const auto& keys : keySets) located.push_back(locate(opt, values, keys));
   std::vector<Eigen::MatrixXd> out;
-  for (const KeyColumns& kc : located) out.push_back(jointBlock(opt, kc));
+  for (const KeyColumns& kc : located) {
+    if (beforeEachSet) beforeEachSet();
+    out.push_back(jointBlock(opt, kc));
+  }
   return out;
 }
 

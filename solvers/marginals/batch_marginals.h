@@ -3,6 +3,7 @@
 // joint blocks of the wanted keys off the factor (jointMarginal(s)) or solve for their columns
 // in chunks (individualMarginals, so all poses of a large graph fit in memory).
 #include <Eigen/Core>
+#include <functional>
 #include <vector>
 
 #include "solvers/batch/nonlinear_optimizer.h"
@@ -16,9 +17,12 @@ Eigen::MatrixXd jointMarginal(NonlinearOptimizer& optimizer, const Values& value
 
 /// The joint marginal of each key set, all on one factorization at values (each set's entries
 /// read off the factor along its variables' elimination-tree paths: cheap for small sets).
+/// beforeEachSet, if set, is called before each set's block: a caller that must be able to
+/// give up (a look that yields to input) throws from it.
 std::vector<Eigen::MatrixXd> jointMarginals(NonlinearOptimizer& optimizer, const Values& values,
                                             const std::vector<std::vector<Key>>& keySets,
-                                            const double* weights = nullptr);
+                                            const double* weights = nullptr,
+                                            const std::function<void()>& beforeEachSet = {});
 
 /// Each key's own marginal (block diagonal of the joint), computed chunk by chunk.
 std::vector<Eigen::MatrixXd> individualMarginals(NonlinearOptimizer& optimizer,

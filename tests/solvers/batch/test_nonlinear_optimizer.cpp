@@ -84,6 +84,30 @@ TEST(NonlinearOptimizer, MarginalsFollowTheWeightsPattern) {
     EXPECT_TRUE(withWeights[s].isApprox(expected[s], 1e-8)) << "set " << s;
 }
 
+// The hook before each set is where a caller that must yield (the GNC look under the server)
+// gives up: once per set, before its block, and a throw from it leaves jointMarginals.
+TEST(NonlinearOptimizer, JointMarginalsCallTheirHookBeforeEachSet) {
+  ZeroedClosures z = zeroEveryOtherClosure("smallGrid3D.g2o");
+  NonlinearOptimizer reduced(z.kept, z.start, z.fixed);
+  Values solved = z.start;
+  reduced.optimize(solved);
+  const std::vector<Key> keys = solved.keys();
+  const std::vector<std::vector<Key>> sets = {{keys[1], keys[2]}, {keys[5]}, {keys[3], keys[9]}};
+  int calls = 0;
+  const auto hooked = jointMarginals(reduced, solved, sets, nullptr, [&] { ++calls; });
+  EXPECT_EQ(calls, 3);
+  const auto plain = jointMarginals(reduced, solved, sets);
+  for (size_t s = 0; s < sets.size(); ++s) EXPECT_EQ(hooked[s], plain[s]) << "set " << s;
+  calls = 0;
+  struct GiveUp {};
+  EXPECT_THROW(jointMarginals(reduced, solved, sets, nullptr,
+                              [&] {
+                                if (++calls == 2) throw GiveUp{};
+                              }),
+               GiveUp);
+  EXPECT_EQ(calls, 2);
+}
+
 TEST(NormalEquations, AWeightOnAFactorOutsideTheLayoutIsAnError) {
   ZeroedClosures z = zeroEveryOtherClosure("smallGrid3D.g2o");
   std::vector<char> active(z.problem.graph.size());
