@@ -168,7 +168,10 @@ void Engine::idle() {
     }
     recoverIfDiverged("an idle optimize", &before);
     const double sec = std::chrono::duration<double>(Clock::now() - t0).count();
-    dirty_ = false;
+    // Input that arrived meanwhile may have made the backend give work up (interrupt: risam's
+    // GNC look); the graph is then not settled, and the next pause optimizes again even if the
+    // input was only a command.
+    dirty_ = queueDepth() > 0;
     std::vector<Key> moved;
     const Values& after = backend_->estimate();
     for (int s = 0; s < after.size(); ++s) {

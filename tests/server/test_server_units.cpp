@@ -580,6 +580,7 @@ TEST(Engine, RefusesARoundThatMakesTheSolverDiverge) {
 struct Yielding {
   static inline std::atomic<int> optimizes{0}, interrupted{0};
   static inline std::atomic<bool> hadInterrupt{false};
+  static inline std::atomic<bool> waits{true};  // false: optimize() returns at once
 };
 class YieldingBackend : public DecoratorBackend {
  public:
@@ -596,6 +597,7 @@ class YieldingBackend : public DecoratorBackend {
   }
   void optimize() override {
     ++Yielding::optimizes;
+    if (!Yielding::waits) return;
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
     while (std::chrono::steady_clock::now() < until) {
       if (interrupt_ && interrupt_()) {
@@ -613,13 +615,17 @@ class YieldingBackend : public DecoratorBackend {
 // The idle optimize gives way: a message that arrives while it runs, or a stop, ends work
 // that asks BackendOptions::interrupt (risam's GNC look at a pause) at once, instead of
 // holding the input back until it is done.
-TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
+bool registerYielding() {
   static const bool registered = [] {
     registerBackend({"yielding", "test: optimize() waits for the interrupt", true},
                     [](const BackendOptions& o) { return std::make_unique<YieldingBackend>(o); });
     return true;
   }();
-  ASSERT_TRUE(registered);
+  return registered;
+}
+
+TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
+  ASSERT_TRUE(registerYielding());
   EngineOptions o = EngineFixture::options("yielding", 30);
   o.idleSeconds = 0;
   Publisher pub(Channels::withPrefix("T_"), [](const std::string&, const std::vector<uint8_t>&) {});
@@ -662,6 +668,37 @@ TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
   stopper.join();
   EXPECT_EQ(Yielding::interrupted, interruptedBefore + 1);
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count(), 10.0);
+}
+
+// An idle optimize given up for a command (no factors, so nothing else marks the graph
+// unsettled) runs again at the next pause: the look it gave up is not lost until new factors
+// come.
+TEST(Engine, AnIdleOptimizeGivenUpForACommandRunsAgainAtTheNextPause) {
+  ASSERT_TRUE(registerYielding());
+  EngineOptions o = EngineFixture::options("yielding", 30);
+  o.idleSeconds = 0;
+  Publisher pub(Channels::withPrefix("T_"), [](const std::string&, const std::vector<uint8_t>&) {});
+  Engine engine(o, pub, nullptr);
+  engine.post({"T_FACTORS", encode(batch("r0", 1, {between2(0, 0, 0, 0, 1, {1, 0, 0.1})}))});
+  ASSERT_TRUE(engine.step());
+  const int optimizesBefore = Yielding::optimizes, interruptedBefore = Yielding::interrupted;
+  std::thread poster([&] {
+    while (Yielding::optimizes == optimizesBefore) std::this_thread::yield();
+    command_t c{};
+    c.sender = "test";
+    c.command = command_t::REQUEST_ESTIMATE;
+    engine.post({"T_COMMAND", encode(c)});
+  });
+  engine.idle();
+  poster.join();
+  EXPECT_EQ(Yielding::interrupted, interruptedBefore + 1);
+  ASSERT_TRUE(engine.step());  // the command
+  Yielding::waits = false;
+  engine.idle();
+  EXPECT_EQ(Yielding::optimizes, optimizesBefore + 2) << "the given-up optimize did not run again";
+  engine.idle();
+  EXPECT_EQ(Yielding::optimizes, optimizesBefore + 2) << "settled: no optimize without input";
+  Yielding::waits = true;
 }
 
 // A solver that runs away need not pass through NaN (riSAM on parking-garage went from 1e3 to
