@@ -624,12 +624,21 @@ bool registerYielding() {
   return registered;
 }
 
+// An engine on "yielding" that optimizes at every pause.
+struct YieldingEngine {
+  static EngineOptions options() {
+    registerYielding();
+    EngineOptions o = EngineFixture::options("yielding", 30);
+    o.idleSeconds = 0;
+    return o;
+  }
+  Publisher pub{Channels::withPrefix("T_"), [](const std::string&, const std::vector<uint8_t>&) {}};
+  Engine engine{options(), pub, nullptr};
+};
+
 TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
-  ASSERT_TRUE(registerYielding());
-  EngineOptions o = EngineFixture::options("yielding", 30);
-  o.idleSeconds = 0;
-  Publisher pub(Channels::withPrefix("T_"), [](const std::string&, const std::vector<uint8_t>&) {});
-  Engine engine(o, pub, nullptr);
+  YieldingEngine y;
+  Engine& engine = y.engine;
   ASSERT_TRUE(Yielding::hadInterrupt);
   std::int64_t seq = 0, id = 0;
   auto send = [&](int from) {
@@ -674,11 +683,8 @@ TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
 // unsettled) runs again at the next pause: the look it gave up is not lost until new factors
 // come.
 TEST(Engine, AnIdleOptimizeGivenUpForACommandRunsAgainAtTheNextPause) {
-  ASSERT_TRUE(registerYielding());
-  EngineOptions o = EngineFixture::options("yielding", 30);
-  o.idleSeconds = 0;
-  Publisher pub(Channels::withPrefix("T_"), [](const std::string&, const std::vector<uint8_t>&) {});
-  Engine engine(o, pub, nullptr);
+  YieldingEngine y;
+  Engine& engine = y.engine;
   engine.post({"T_FACTORS", encode(batch("r0", 1, {between2(0, 0, 0, 0, 1, {1, 0, 0.1})}))});
   ASSERT_TRUE(engine.step());
   const int optimizesBefore = Yielding::optimizes, interruptedBefore = Yielding::interrupted;
