@@ -612,22 +612,15 @@ class YieldingBackend : public DecoratorBackend {
   std::function<bool()> interrupt_;
 };
 
-// The idle optimize gives way: a message that arrives while it runs, or a stop, ends work
-// that asks BackendOptions::interrupt (risam's GNC look at a pause) at once, instead of
-// holding the input back until it is done.
-bool registerYielding() {
-  static const bool registered = [] {
-    registerBackend({"yielding", "test: optimize() waits for the interrupt", true},
-                    [](const BackendOptions& o) { return std::make_unique<YieldingBackend>(o); });
-    return true;
-  }();
-  return registered;
-}
-
-// An engine on "yielding" that optimizes at every pause.
+// An engine on "yielding" (registered on first use) that optimizes at every pause.
 struct YieldingEngine {
   static EngineOptions options() {
-    registerYielding();
+    static const bool registered = [] {
+      registerBackend({"yielding", "test: optimize() waits for the interrupt", true},
+                      [](const BackendOptions& o) { return std::make_unique<YieldingBackend>(o); });
+      return true;
+    }();
+    (void)registered;
     EngineOptions o = EngineFixture::options("yielding", 30);
     o.idleSeconds = 0;
     return o;
@@ -636,6 +629,9 @@ struct YieldingEngine {
   Engine engine{options(), pub, nullptr};
 };
 
+// The idle optimize gives way: a message that arrives while it runs, or a stop, ends work
+// that asks BackendOptions::interrupt (risam's GNC look at a pause) at once, instead of
+// holding the input back until it is done.
 TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
   YieldingEngine y;
   Engine& engine = y.engine;
