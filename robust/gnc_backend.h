@@ -12,8 +12,8 @@
 //        stop when every weight is within 1e-4 of 0 or 1; return at once if all r² ≤ c̄².
 //   Both: stop when the weighted cost changes by less than 1e-5 relatively, or after 100
 //   outer steps.
+#include <exception>
 #include <functional>
-#include <stdexcept>
 #include <vector>
 
 #include "solvers/batch/batch_backend.h"

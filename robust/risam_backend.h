@@ -212,10 +212,10 @@ struct RisamOptions {
   /// last one. A run with one optimize() (loopd-solve) always looks. ≤ 1: at every
   /// optimize() whose answer rejects anything.
   double gncLookGrowth = 1.5;
-  /// Asked at every iteration of the GNC look's solves and while its consistent-set test
-  /// runs; true gives the look up: the answer stays as it was before it, and the next
-  /// optimize() looks again. The server sets it (BackendOptions::interrupt) to "input is
-  /// waiting, or the server stops", so a pause's look never holds new data back. Unset: never.
+  /// The GNC look's GncOptions::interrupt (asked throughout the look: see there); true gives
+  /// the look up: the answer stays as it was before it, and the next optimize() looks again.
+  /// The server sets it (BackendOptions::interrupt) to "input is waiting, or the server
+  /// stops", so a pause's look never holds new data back. Unset: never.
   std::function<bool()> interrupt;
 };
 
