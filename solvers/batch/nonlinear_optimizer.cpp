@@ -94,7 +94,9 @@ bool NonlinearOptimizer::stepIsNegligible(const std::vector<double>& step) const
 bool NonlinearOptimizer::remainingDecreaseNegligible(double cost, std::vector<double>& work,
                                                      std::vector<double>& solution) {
   // gᵀH⁻¹g is what the next Gauss–Newton step would gain; the previous factorization is
-  // close enough to H here to tell "nothing left" without paying for a new one.
+  // close enough to H here to tell "nothing left" without paying for a new one. Without one
+  // (Dogleg's Cauchy-point steps on a singular H) it cannot be told.
+  if (!cholesky_.factorized()) return false;
   const std::vector<double>& g = current_->gradient();
   work = g;
   cholesky_.solve(work.data(), solution.data());

@@ -58,6 +58,9 @@ struct HypothesisGroup {
   int line = 0;  // the HYPOTHESES line
 };
 
+/// How tightly an EQUIV pair is held together: the information of its identity constraint.
+constexpr double kEquivalenceInformation = 1e6;
+
 struct Dataset {
   std::string path;
   std::string format;  // "g2o", "toro", "victoria"
@@ -66,7 +69,8 @@ struct Dataset {
   std::vector<Vertex> poses;      // SE2 or SE3, file order
   std::vector<Vertex> landmarks;  // Point2 or Point3, file order
   std::vector<Edge> edges;        // file order
-  /// TORO EQUIV lines: pairs of pose ids that are the same place.
+  /// TORO EQUIV lines: pairs of pose ids that are the same place (solved as an identity
+  /// between constraint of information kEquivalenceInformation·I).
   std::vector<std::pair<std::int64_t, std::int64_t>> equivalences;
   /// Ambiguous measurements in file order (their edges are in `edges` too).
   std::vector<HypothesisGroup> hypotheses;

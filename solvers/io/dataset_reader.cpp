@@ -11,6 +11,10 @@ Dataset readDataset(const std::string& path) {
 }
 
 Dataset parseDataset(std::string_view text, const std::string& name) {
+  // A UTF-8 byte-order mark (editors on Windows write one) is not part of the first tag.
+  constexpr std::string_view kByteOrderMark = "\xEF\xBB\xBF";
+  if (text.substr(0, kByteOrderMark.size()) == kByteOrderMark)
+    text.remove_prefix(kByteOrderMark.size());
   detail::LineScanner first(name, text);
   if (!first.next()) throw DatasetError(name, 0, "the file has no edges (it is empty)");
   const std::string_view tag = first.tag();

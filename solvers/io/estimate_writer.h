@@ -14,8 +14,9 @@ namespace loopd::io {
 void writeG2oVertices(const std::string& path, const Dataset& estimate);
 
 /// The vertex lines, then one line per edge in order: EDGE_SE2, EDGE_SE3:QUAT, EDGE_SE2_XY or
-/// EDGE_SE3_TRACKXYZ with the information's upper triangle row by row (g2o's order). TORO
-/// EQUIV pairs have no g2o form and are not written. Throws DatasetError for I/O failures,
+/// EDGE_SE3_TRACKXYZ with the information's upper triangle row by row (g2o's order); TORO
+/// EQUIV pairs last, as EDGE_SE2 a b 0 0 0 with information kEquivalenceInformation·I (what
+/// they are solved as; g2o has no EQUIV). Throws DatasetError for I/O failures,
 /// for a bearing-range edge (no g2o tag), and when a landmark id equals a pose id (g2o has one
 /// id space; Victoria Park has two).
 void writeG2oGraph(const std::string& path, const Dataset& graph);

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <memory>
 
+#include "solvers/core/key.h"
 #include "solvers/io/dataset.h"
 
 namespace loopd::io::detail {
@@ -105,6 +106,9 @@ std::int64_t LineScanner::id(std::size_t i) const {
   if (ec != std::errc() || end != s.data() + s.size()) {
     fail(fieldName(i) + " is not an integer id");
   }
+  // A key keeps kKeyIndexBits of the id: beyond them two ids would be one variable.
+  if (v < 0 || static_cast<std::uint64_t>(v) > kMaxKeyIndex)
+    fail(fieldName(i) + " is out of range for an id (0 to " + std::to_string(kMaxKeyIndex) + ")");
   return v;
 }
 

@@ -34,7 +34,7 @@ class LineScanner {
   void expectCount(std::size_t n) const;
   /// Throws unless min ≤ count().
   void expectAtLeast(std::size_t min) const;
-  /// Field i after the tag (0-based) as an integer id.
+  /// Field i after the tag (0-based) as an integer id, 0 to kMaxKeyIndex (what a Key holds).
   std::int64_t id(std::size_t i) const;
   /// Field i after the tag (0-based) as it is written.
   std::string_view field(std::size_t i) const { return fields_[i + 1]; }

@@ -9,6 +9,7 @@ HessianFactorization::HessianFactorization(FactorizationKind kind) : kind_(kind)
 }
 
 void HessianFactorization::analyze(const HessianLayout& layout) {
+  factorized_ = false;
   if (cholmod_)
     cholmod_->analyze(layout.dimension(), layout.columnStart(), layout.rowIndex());
   else
@@ -16,7 +17,8 @@ void HessianFactorization::analyze(const HessianLayout& layout) {
 }
 
 bool HessianFactorization::factorize(const std::vector<double>& values) {
-  return cholmod_ ? cholmod_->factorize(values) : block_.factorize(values);
+  factorized_ = cholmod_ ? cholmod_->factorize(values) : block_.factorize(values);
+  return factorized_;
 }
 
 void HessianFactorization::solve(const double* b, double* x, int ncols) {

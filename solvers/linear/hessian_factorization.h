@@ -24,12 +24,15 @@ class HessianFactorization {
   /// ancestor-path sweeps; CHOLMOD: full solves of the unit columns).
   void inverseBlock(const std::vector<int>& scalars, double* out);
 
+  /// Whether the last factorize() succeeded (solve() and inverseBlock() need it).
+  bool factorized() const { return factorized_; }
   FactorizationKind kind() const { return kind_; }
   double flops() const;
   long factorNonZeros() const;
 
  private:
   FactorizationKind kind_;
+  bool factorized_ = false;
   BlockCholesky block_;
   std::unique_ptr<SparseCholesky> cholmod_;
 };

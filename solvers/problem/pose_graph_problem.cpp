@@ -34,11 +34,10 @@ void insertVertex(Values& values, const io::Vertex& v) {
   }
 }
 
-FactorPtr makeFactor(const io::Edge& e) {
+FactorPtr makeFactor(const io::Edge& e, bool odometry) {
   const Key a = poseKey(static_cast<std::uint64_t>(e.from));
   const auto& m = e.measurement;
-  const bool consecutive = e.to == e.from + 1 || e.from == e.to + 1;
-  const FactorRole betweenRole = consecutive ? FactorRole::Odometry : FactorRole::LoopClosure;
+  const FactorRole betweenRole = odometry ? FactorRole::Odometry : FactorRole::LoopClosure;
   switch (e.type) {
     case io::EdgeType::BetweenSE2:
       return std::make_shared<BetweenFactorSE2>(a, poseKey(static_cast<std::uint64_t>(e.to)),
@@ -66,6 +65,13 @@ FactorPtr makeFactor(const io::Edge& e) {
 
 }  // namespace
 
+bool neighboursInIdOrder(const std::vector<std::int64_t>& sortedPoseIds, std::int64_t a,
+                         std::int64_t b) {
+  if (a > b) std::swap(a, b);
+  const auto it = std::lower_bound(sortedPoseIds.begin(), sortedPoseIds.end(), a);
+  return it != sortedPoseIds.end() && *it == a && it + 1 != sortedPoseIds.end() && *(it + 1) == b;
+}
+
 PoseGraphProblem buildProblem(const io::Dataset& ds) {
   PoseGraphProblem p;
   p.is3d = ds.is3d;
@@ -78,11 +84,15 @@ PoseGraphProblem buildProblem(const io::Dataset& ds) {
                                          [](const auto& x, const auto& y) { return x.id < y.id; });
     p.firstPose = vertexKey(*lowest);
   }
+  std::vector<std::int64_t> poseIds;
+  poseIds.reserve(ds.poses.size());
+  for (const auto& v : ds.poses) poseIds.push_back(v.id);
+  std::sort(poseIds.begin(), poseIds.end());
   p.graph.reserve(ds.edges.size() + ds.equivalences.size());
   for (const auto& e : ds.edges) {
     FactorPtr f;
     try {
-      f = makeFactor(e);
+      f = makeFactor(e, neighboursInIdOrder(poseIds, e.from, e.to));
     } catch (const std::invalid_argument& ex) {
       throw std::invalid_argument(ds.path + ":" + std::to_string(e.line) + ": " + ex.what());
     }
@@ -105,7 +115,7 @@ PoseGraphProblem buildProblem(const io::Dataset& ds) {
   for (const auto& [a, b] : ds.equivalences) {
     auto f = std::make_shared<BetweenFactorSE2>(
         poseKey(static_cast<std::uint64_t>(a)), poseKey(static_cast<std::uint64_t>(b)), SE2(),
-        Eigen::Matrix3d::Identity() * 1e6, FactorRole::LoopClosure);
+        Eigen::Matrix3d::Identity() * io::kEquivalenceInformation, FactorRole::LoopClosure);
     f->setId(static_cast<FactorId>(p.graph.size()));
     p.graph.add(std::move(f));
   }

@@ -30,12 +30,18 @@ struct PoseGraphProblem {
   int landmarks = 0;
 };
 
-/// Builds factors and initial values. Between edges whose ends are consecutive ids are
-/// odometry, others (and every alternative of a HYPOTHESES group) loop closures; pose–landmark
-/// edges are landmark sightings. EQUIV pairs become tight between constraints (identity,
-/// information 1e6). Throws std::invalid_argument (naming the file line) for an edge the factors
-/// reject.
+/// Builds factors and initial values. Between edges whose ends are next to each other in the
+/// file's pose ids (neighboursInIdOrder) are odometry, others (and every alternative of a
+/// HYPOTHESES group) loop closures; pose–landmark edges are landmark sightings. EQUIV pairs become
+/// tight between constraints (identity, information 1e6). Throws std::invalid_argument (naming the
+/// file line) for an edge the factors reject.
 PoseGraphProblem buildProblem(const io::Dataset& dataset);
+
+/// Whether poses a and b are next to each other in sortedPoseIds (every pose id, ascending):
+/// consecutive poses, joined by odometry, whatever the ids' step (a file keeping every second
+/// pose, Victoria Park's ids shared with landmarks).
+bool neighboursInIdOrder(const std::vector<std::int64_t>& sortedPoseIds, std::int64_t a,
+                         std::int64_t b);
 
 /// Group g as the Backend seam takes it: id g, alternatives the group's factors.
 AmbiguousFactor ambiguousFactor(const PoseGraphProblem& problem, int group);

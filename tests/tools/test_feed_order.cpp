@@ -88,6 +88,23 @@ TEST(FeedOrder, FactorsNameTheirRobotsFrames) {
   EXPECT_EQ(name(sighting.keys[1]), "0 landmark 7");
 }
 
+// Odometry is one robot's poses next to each other in id order, as loopd-solve reads files:
+// a file keeping every second pose still has odometry.
+TEST(FeedOrder, OdometryJoinsNeighboursInIdOrder) {
+  io::Dataset ds = sixPoses();
+  for (auto& v : ds.poses) v.id *= 2;
+  for (auto& e : ds.edges) {
+    e.from *= 2;
+    if (e.type != io::EdgeType::PosePoint2) e.to *= 2;
+  }
+  const FeedOrder one(ds, -1, 1, false);
+  for (int i = 0; i < 5; ++i)
+    EXPECT_EQ(one.factor(ds.edges[i]).role, loopd::factor_t::ROLE_ODOMETRY);
+  EXPECT_EQ(one.factor(ds.edges[5]).role, loopd::factor_t::ROLE_LOOP_CLOSURE);  // 8 -> 2
+  const FeedOrder two(ds, -1, 2, false);  // robot 0: 0 2 4, robot 1: 6 8 10
+  EXPECT_EQ(two.factor(ds.edges[2]).role, loopd::factor_t::ROLE_LOOP_CLOSURE);  // across robots
+}
+
 TEST(FeedOrder, AFileWithoutPosesIsRefused) {
   io::Dataset empty;
   empty.path = "empty.g2o";

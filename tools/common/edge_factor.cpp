@@ -4,7 +4,7 @@
 
 namespace loopd::tools {
 
-loopd::factor_t edgeFactor(const io::Edge& e, int ra, int rb) {
+loopd::factor_t edgeFactor(const io::Edge& e, int ra, int rb, bool odometry) {
   using client::KeyRef;
   const int d = io::edgeDimension(e.type);
   const Eigen::MatrixXd info = e.information.topLeftCorner(d, d);
@@ -20,8 +20,7 @@ loopd::factor_t edgeFactor(const io::Edge& e, int ra, int rb) {
   if (io::isBetween(e.type)) {
     f.type = e.type == io::EdgeType::BetweenSE2 ? loopd::factor_t::BETWEEN_SE2
                                                 : loopd::factor_t::BETWEEN_SE3;
-    const bool consecutive = ra == rb && (e.to == e.from + 1 || e.from == e.to + 1);
-    f.role = consecutive ? loopd::factor_t::ROLE_ODOMETRY : loopd::factor_t::ROLE_LOOP_CLOSURE;
+    f.role = odometry ? loopd::factor_t::ROLE_ODOMETRY : loopd::factor_t::ROLE_LOOP_CLOSURE;
     f.keys = {client::wireKey(KeyRef::pose(ra, e.from)), client::wireKey(KeyRef::pose(rb, e.to))};
   } else {
     f.type = e.type == io::EdgeType::PosePoint2   ? loopd::factor_t::POSE_POINT2

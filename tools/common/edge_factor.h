@@ -7,8 +7,8 @@
 namespace loopd::tools {
 
 /// id = the edge index; keys are robot `robotFrom`'s pose e.from and, for a between edge,
-/// robot `robotTo`'s pose e.to (odometry when both are one robot's consecutive ids, else a
-/// loop closure), for a sighting robot `robotFrom`'s landmark e.to.
-loopd::factor_t edgeFactor(const io::Edge& e, int robotFrom, int robotTo);
+/// robot `robotTo`'s pose e.to (odometry when `odometry`, else a loop closure), for a sighting
+/// robot `robotFrom`'s landmark e.to.
+loopd::factor_t edgeFactor(const io::Edge& e, int robotFrom, int robotTo, bool odometry);
 
 }  // namespace loopd::tools

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "solvers/problem/pose_graph_problem.h"
 #include "tools/common/edge_factor.h"
 
 namespace loopd::tools {
@@ -13,6 +14,7 @@ FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool i
   std::sort(ids.begin(), ids.end());
   if (poses >= 0 && static_cast<size_t>(poses) < ids.size()) ids.resize(static_cast<size_t>(poses));
   if (ids.empty()) throw std::runtime_error("no poses in " + ds.path);
+  sortedIds_ = ids;
   const size_t n = ids.size();
   const size_t robots = std::min<size_t>(static_cast<size_t>(std::max(1, robotsWanted)), n);
   robots_ = static_cast<int>(robots);
@@ -47,8 +49,11 @@ long FeedOrder::dueAt(const io::Edge& e) const {
 
 loopd::factor_t FeedOrder::factor(const io::Edge& e, int robotOffset) const {
   const int from = robotOf(e.from);
-  return edgeFactor(e, from + robotOffset,
-                    (io::isBetween(e.type) ? robotOf(e.to) : from) + robotOffset);
+  const int to = io::isBetween(e.type) ? robotOf(e.to) : from;
+  // Odometry: one robot's poses next to each other in id order (as loopd-solve reads files).
+  const bool odometry =
+      io::isBetween(e.type) && from == to && neighboursInIdOrder(sortedIds_, e.from, e.to);
+  return edgeFactor(e, from + robotOffset, to + robotOffset, odometry);
 }
 
 }  // namespace loopd::tools

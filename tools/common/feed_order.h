@@ -35,6 +35,7 @@ class FeedOrder {
   int robots_ = 1;
   std::unordered_map<std::int64_t, int> robotOf_;
   std::unordered_map<std::int64_t, long> rank_;
+  std::vector<std::int64_t> sortedIds_;  // the fed poses' ids, ascending
   std::vector<bool> startsRobot_;
 };
 

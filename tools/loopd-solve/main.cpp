@@ -28,6 +28,12 @@ double since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+bool isIncremental(const std::string& solver) {
+  for (const BackendInfo& b : availableBackends())
+    if (b.name == solver) return b.incremental;
+  return false;
+}
+
 int run(const tools::SolveOptions& opt) {
   const auto tParse = Clock::now();
   io::Dataset dataset = io::readDataset(opt.input);
@@ -62,6 +68,9 @@ int run(const tools::SolveOptions& opt) {
     BackendUpdate all = wholeProblemUpdate(problem);
     if (!backend->handlesAmbiguous()) flattenAmbiguous(all);
     backend->update(all);
+    // An incremental variant's update() takes the steps one update takes online; the whole
+    // file at once is solved to convergence, as a batch variant's update() does.
+    if (isIncremental(opt.solver)) backend->optimize();
   }
   const double solveSeconds = since(tSolve);
   const SolveSummary summary = backend->summary();
@@ -70,6 +79,11 @@ int run(const tools::SolveOptions& opt) {
     std::fprintf(stderr, "%s: final chi2 %.9g after %d iterations (%s), solve %.3f s\n",
                  backend->name().c_str(), finalChi2, summary.iterations, summary.stopReason.c_str(),
                  solveSeconds);
+
+  // Not an error (the estimate is the best reached), but not to be missed either.
+  if (!summary.converged && !summary.stopReason.empty())
+    std::fprintf(stderr, "loopd-solve: warning: %s stopped before converging: %s\n",
+                 backend->name().c_str(), summary.stopReason.c_str());
 
   // A diverged solve (NaN or infinite values) is an error, and its estimate is not written:
   // downstream readers would take it for poses.

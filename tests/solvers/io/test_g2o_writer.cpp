@@ -8,6 +8,7 @@
 #include "io_test_util.h"
 #include "solvers/io/dataset_reader.h"
 #include "solvers/io/estimate_writer.h"
+#include "solvers/problem/pose_graph_problem.h"
 
 namespace loopd::io {
 namespace {
@@ -52,6 +53,29 @@ TEST(RoundTrip, LandmarksIn2DAnd3D) {
           info3 + "\n",
       "lm3.g2o");
   test::expectSameGraph(ds3, roundTrip(ds3));
+}
+
+// g2o has no EQUIV: the pairs are written as what they are solved as, identity edges of
+// information kEquivalenceInformation after every other edge (which keep their indices), so
+// the written graph is the same problem (before: dropped, a different graph).
+TEST(RoundTrip, ToroEquivalencesBecomeIdentityEdgesAtTheEnd) {
+  const Dataset ds = readDataset(datasetPath("w100.graph"));
+  ASSERT_EQ(ds.equivalences.size(), 40u);
+  const Dataset back = roundTrip(ds);
+  EXPECT_TRUE(back.equivalences.empty());
+  ASSERT_EQ(back.edges.size(), ds.edges.size() + ds.equivalences.size());
+  for (std::size_t k = 0; k < ds.equivalences.size(); ++k) {
+    const Edge& e = back.edges[ds.edges.size() + k];
+    EXPECT_EQ(e.type, EdgeType::BetweenSE2);
+    EXPECT_EQ(e.from, ds.equivalences[k].first);
+    EXPECT_EQ(e.to, ds.equivalences[k].second);
+    EXPECT_EQ(e.measurement, (std::array<double, 7>{}));
+    const Eigen::Matrix3d info = e.information.topLeftCorner<3, 3>();
+    EXPECT_TRUE(info == Eigen::Matrix3d::Identity() * kEquivalenceInformation) << info;
+  }
+  const PoseGraphProblem original = buildProblem(ds), written = buildProblem(back);
+  ASSERT_EQ(written.graph.size(), original.graph.size());
+  EXPECT_DOUBLE_EQ(written.graph.chi2(written.initial), original.graph.chi2(original.initial));
 }
 
 TEST(RoundTrip, VictoriaParkBecomesG2o) {

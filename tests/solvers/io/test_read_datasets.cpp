@@ -17,6 +17,7 @@
 #include "solvers/geometry/se2.h"
 #include "solvers/geometry/se3.h"
 #include "solvers/io/dataset_reader.h"
+#include "solvers/problem/pose_graph_problem.h"
 
 namespace loopd::io {
 namespace {
@@ -287,6 +288,36 @@ TEST(Odometry, OdometryMaySkipIdsTakenByLandmarks) {
   EXPECT_EQ(ds.poses[2].id, 4);
   EXPECT_NEAR(ds.poses[2].value[0], 2.0, 1e-15);
   EXPECT_NEAR(ds.poses[2].value[1], 0.0, 1e-15);
+}
+
+// The solvers trust odometry, consecutive poses, and judge the rest: "consecutive" is next in
+// id order, not id + 1 (before: a file keeping every second pose had no odometry at all, and
+// Victoria Park's 151 odometry edges over a landmark's id were loop closures).
+TEST(Odometry, TheProblemTrustsNeighboursInIdOrder) {
+  const Dataset gaps = parseVictoria(
+      "ODOMETRY 0 2 1 0 0 1 0 0 1 0 1\n"
+      "LANDMARK 2 1 0 1 1 0 1\n"
+      "ODOMETRY 2 4 1 0 0 1 0 0 1 0 1\n"
+      "ODOMETRY 0 4 2 0 0 1 0 0 1 0 1\n",
+      "gaps.txt");
+  const PoseGraphProblem p = buildProblem(gaps);
+  EXPECT_EQ(p.graph[0]->role(), FactorRole::Odometry);
+  EXPECT_EQ(p.graph[1]->role(), FactorRole::Landmark);
+  EXPECT_EQ(p.graph[2]->role(), FactorRole::Odometry);
+  EXPECT_EQ(p.graph[3]->role(), FactorRole::LoopClosure);
+  // Every second pose of a file: its odometry is still odometry, its closures still closures.
+  const PoseGraphProblem every2nd =
+      buildProblem(parseG2o("EDGE_SE2 0 2 1 0 0 1 0 0 1 0 1\n"
+                            "EDGE_SE2 4 2 -1 0 0 1 0 0 1 0 1\n"
+                            "EDGE_SE2 0 4 2 0 0 1 0 0 1 0 1\n",
+                            "every2nd.g2o"));
+  EXPECT_EQ(every2nd.graph[0]->role(), FactorRole::Odometry);
+  EXPECT_EQ(every2nd.graph[1]->role(), FactorRole::Odometry);
+  EXPECT_EQ(every2nd.graph[2]->role(), FactorRole::LoopClosure);
+  int odometry = 0;
+  const PoseGraphProblem victoria = buildProblem(readDataset(datasetPath("victoria_park.txt")));
+  for (const auto& f : victoria.graph.factors()) odometry += f->role() == FactorRole::Odometry;
+  EXPECT_EQ(odometry, 6968);  // one per pose after the first
 }
 
 TEST(Odometry, VictoriaParkFollowsItsOdometry) {

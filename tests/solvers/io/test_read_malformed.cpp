@@ -84,6 +84,18 @@ TEST(Malformed, NotANumber) {
   expectError(V0 + "VERTEX_SE2 1.5 0 0 0\n" + E01, 2, "field 2 '1.5' is not an integer id");
   expectError(V0 + "VERTEX_SE2 x1 0 0 0\n" + E01, 2, "field 2 'x1' is not an integer id");
   expectError(V0 + "VERTEX_SE2 99999999999999999999 0 0 0\n", 2, "out of range for an id");
+  // A key holds 40 bits of an id: 2^40 would be pose 0 again, −1 pose 2^40 − 1.
+  expectError(V0 + "VERTEX_SE2 1099511627776 0 0 0\n" + E01, 2,
+              "VERTEX_SE2 field 2 '1099511627776' is out of range for an id (0 to 1099511627775)");
+  expectError(V0 + "VERTEX_SE2 -1 0 0 0\n" + E01, 2, "'-1' is out of range for an id");
+  expectError(V0 + V1 + "EDGE_SE2 0 1099511627777 1 0 0 1 0 0 1 0 1\n", 3,
+              "out of range for an id");
+  EXPECT_EQ(parseG2o(V0 + "VERTEX_SE2 1099511627775 0 0 0\nEDGE_SE2 0 1099511627775 1 0 0 1 0 0 "
+                          "1 0 1\n",
+                     "top.g2o")
+                .poses[1]
+                .id,
+            1099511627775);
   expectError(V0 + "VERTEX_SE2 1 0x10 0 0\n", 2, "'0x10' is not a number");
   // A huge garbage token is quoted short.
   const test::ScratchFile file(V0 + "VERTEX_SE2 1 " + std::string(100000, 'z') + " 0 0\n", ".g2o");
@@ -217,6 +229,13 @@ TEST(WellFormed, VictoriaLandmarkMayShareAnIdWithAPose) {
   ASSERT_EQ(ds.landmarks.size(), 1u);
   EXPECT_EQ(ds.landmarks[0].id, 1);
   EXPECT_NEAR(ds.landmarks[0].value[0], 3.0, 1e-15);
+}
+
+TEST(WellFormed, AByteOrderMarkIsNotPartOfTheFirstTag) {
+  const Dataset ds = parseDataset("\xEF\xBB\xBF" + V0 + V1 + E01, "bom.g2o");
+  EXPECT_EQ(ds.format, "g2o");
+  EXPECT_EQ(ds.poses.size(), 2u);
+  EXPECT_EQ(ds.poses[0].line, 1);
 }
 
 TEST(WellFormed, FixLinesAreAccepted) {
