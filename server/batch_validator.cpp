@@ -10,6 +10,7 @@
 
 #include "loopd/error_t.hpp"
 #include "server/wire.h"
+#include "solvers/factors/factor.h"
 
 namespace loopd::server {
 
@@ -134,14 +135,16 @@ void FactorBatchValidator::checkFactor(const F& f, std::int64_t reportId,
       bad(E::NOT_POSITIVE_DEFINITE,
           std::string(f.noise_kind == F::NOISE_COVARIANCE ? "covariance" : "information") +
               " not positive definite (smallest eigenvalue " + num(es.eigenvalues()(0)) + ")");
-    } else {
-      // Also the derived information must be finite and PD (extreme covariances).
-      if (f.noise_kind == F::NOISE_COVARIANCE && out.size() == before) {
-        const Eigen::MatrixXd info = informationOf(f);
-        Eigen::LLT<Eigen::MatrixXd> l2(info);
-        if (!info.allFinite() || l2.info() != Eigen::Success)
-          bad(E::NOT_POSITIVE_DEFINITE, "covariance too ill-conditioned to invert");
-      }
+    } else if (out.size() == before) {
+      // Also the derived information must be finite and PD (extreme covariances), and within
+      // what the factors take (kMaxInformation: beyond it χ² overflows and the solve with it).
+      const Eigen::MatrixXd info = informationOf(f);
+      Eigen::LLT<Eigen::MatrixXd> l2(info);
+      if (!info.allFinite() || l2.info() != Eigen::Success)
+        bad(E::NOT_POSITIVE_DEFINITE, "covariance too ill-conditioned to invert");
+      else if (info.diagonal().maxCoeff() > kMaxInformation)
+        bad(E::LIMIT_EXCEEDED, "information " + num(info.diagonal().maxCoeff()) +
+                                   " exceeds 1e15 (a standard deviation below 3.2e-8)");
     }
   }
   if (f.robust.size() > static_cast<size_t>(F::MAX_ROBUST_LENGTH))

@@ -59,6 +59,12 @@ Eigen::Matrix<double, D, D> sqrtInformation(const Eigen::Matrix<double, D, D>& i
   if (!info.allFinite()) throw std::invalid_argument("information matrix is not finite");
   if (!info.isApprox(info.transpose(), 1e-9))
     throw std::invalid_argument("information matrix is not symmetric");
+  // Beyond it a residual's χ² overflows (1e300 with a residual of 13), or swamps every other
+  // factor's in one sum: the solve goes non-finite and takes the whole graph with it.
+  if (info.diagonal().maxCoeff() > kMaxInformation)
+    throw std::invalid_argument(
+        "information matrix exceeds 1e15 (a standard deviation below 3.2e-8): too tight to "
+        "solve in double precision");
   Eigen::LLT<Eigen::Matrix<double, D, D>> llt(info);
   if (llt.info() != Eigen::Success)
     throw std::invalid_argument("information matrix is not positive definite");

@@ -91,8 +91,11 @@ class Factor {
 
 using FactorPtr = std::shared_ptr<const Factor>;
 
+/// The largest information (diagonal entry of Ω) a factor takes: σ ≥ 3.2e-8.
+constexpr double kMaxInformation = 1e15;
+
 /// Upper-triangular U with UᵀU = Ω; throws std::invalid_argument if Ω is not symmetric
-/// positive definite or not finite.
+/// positive definite, not finite, or beyond kMaxInformation.
 template <int D>
 Eigen::Matrix<double, D, D> sqrtInformation(const Eigen::Matrix<double, D, D>& information);
 

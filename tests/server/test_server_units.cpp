@@ -156,6 +156,15 @@ TEST(FactorBatchValidator, ReportsEachProblemWithItsCode) {
        loopd::error_t::NON_FINITE},
       {[&](factor_t& f) { f.noise = {1, 0, 0, -1, 0, 1}; }, loopd::error_t::NOT_POSITIVE_DEFINITE},
       {[&](factor_t& f) { f.noise = {1, 2, 0, 1, 0, 1}; }, loopd::error_t::NOT_POSITIVE_DEFINITE},
+      // Positive definite but beyond kMaxInformation: 1e300 passed and a closure disagreeing
+      // with the odometry then made χ² inf and the graph unsolvable (every later batch INTERNAL).
+      {[&](factor_t& f) { f.noise = {1e300, 0, 0, 1e300, 0, 1e300}; },
+       loopd::error_t::LIMIT_EXCEEDED},
+      {[&](factor_t& f) {
+         f.noise_kind = factor_t::NOISE_COVARIANCE;
+         f.noise = {1e-20, 0, 0, 1, 0, 1};
+       },
+       loopd::error_t::LIMIT_EXCEEDED},
       {[&](factor_t& f) {
          f.noise.pop_back();
          f.num_noise = 5;

@@ -572,6 +572,11 @@ TEST(SqrtInformation, RejectsBadMatrices) {
   i6(3, 3) = inf;
   expectRejected<6>(i6, "Inf");
   expectRejected<1>(Eigen::Matrix<double, 1, 1>(nan), "NaN 1x1");
+  // Finite and positive definite, but beyond what a solve in doubles survives: 1e300 made the
+  // server's graph unsolvable (χ² inf once a closure disagreed with the odometry).
+  expectRejected<3>(Eigen::Matrix3d::Identity() * 1e300, "1e300");
+  expectRejected<6>(Mat6(Vec6(1, 1, 1, 1, 1, 2 * kMaxInformation).asDiagonal()), "one axis");
+  EXPECT_NO_THROW(sqrtInformation<3>(Eigen::Matrix3d::Identity() * kMaxInformation));
 }
 
 TEST(SqrtInformation, FactorConstructorsValidate) {
