@@ -93,6 +93,11 @@ TEST(LoopdFeed, BadCommandLines) {
   EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-quiet", "-1"}, tmp("l.log")), 2);
   EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-quiet", "nan"}, tmp("l.log")), 2);
   EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-batches", "many"}, tmp("l.log")), 2);
+  // The whole value is the number (before: std::stoll/stod took "3x" as 3, "1e999" as a bare
+  // "stod" message).
+  EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-batches", "3x"}, tmp("l.log")), 2);
+  EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-quiet", "2s"}, tmp("l.log")), 2);
+  EXPECT_EQ(runTool({kListen, "--out", tmp("e.g2o"), "--until-quiet", "1e999"}, tmp("l.log")), 2);
 }
 
 TEST(LoopdListen, WritesEstimateAndCovariancesThenExitsWhenQuiet) {

@@ -11,6 +11,16 @@ namespace loopd::tools {
 /// std::invalid_argument("FLAG needs a value") when argv[i] is the last argument.
 std::string flagValue(int argc, char** argv, int& i);
 
+/// `text` as a flag's value: the whole string a base-10 integer in [lo, hi]. Throws
+/// std::invalid_argument("FLAG takes an integer in [lo, hi], got 'text'") otherwise (trailing
+/// characters, overflow, out of range).
+long long parseIntFlag(const std::string& flag, const std::string& text, long long lo,
+                       long long hi);
+/// `text` as a flag's value: the whole string a finite number in [lo, hi]. Throws
+/// std::invalid_argument("FLAG takes a number in [lo, hi], got 'text'") otherwise (trailing
+/// characters, nan, inf, overflow, out of range).
+double parseNumberFlag(const std::string& flag, const std::string& text, double lo, double hi);
+
 /// main() of a tool: options = parse(argc, argv), then run(options). A parse error prints
 /// "NAME: message", a blank line and the usage to stderr and returns 2; a run error prints
 /// "NAME: message" to stderr and returns 1; otherwise run's result.

@@ -1,8 +1,9 @@
 #include "tools/common/json_writer.h"
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
+#include <cstring>
 #include <stdexcept>
 
 namespace loopd::tools {
@@ -85,11 +86,20 @@ std::string JsonObject::str() const {
   return s + "}\n";
 }
 
-void JsonObject::writeFile(const std::string& path) const {
-  std::ofstream out(path);
-  if (!out) throw std::runtime_error("cannot write " + path);
-  out << str();
-  if (!out) throw std::runtime_error("error writing " + path);
+void JsonObject::writeFile(const std::string& path) const { writeTextFile(path, str()); }
+
+void writeTextFile(const std::string& path, const std::string& text) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) throw std::runtime_error("cannot write " + path + ": " + std::strerror(errno));
+  // The data reach the file only on the flush: a full disk shows there (or at the close).
+  errno = 0;
+  bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
+  ok = std::fflush(f) == 0 && ok;
+  int err = errno;
+  if (std::fclose(f) != 0 && ok) ok = false, err = errno;
+  if (!ok)
+    throw std::runtime_error("cannot write " + path + ": " +
+                             (err ? std::strerror(err) : "write error"));
 }
 
 }  // namespace loopd::tools

@@ -20,7 +20,9 @@ class JsonObject {
   JsonObject& add(const std::string& key, const std::vector<std::int64_t>& values);
   JsonObject& add(const std::string& key, const std::vector<double>& values);
   std::string str() const;
-  /// Throws std::runtime_error if the file cannot be written.
+  /// Writes str() to path. Throws std::runtime_error("cannot write PATH: reason") if the file
+  /// cannot be opened or any of it cannot be written (checked through the final flush and
+  /// close, so a full disk is an error).
   void writeFile(const std::string& path) const;
 
  private:
@@ -28,5 +30,8 @@ class JsonObject {
 };
 
 std::string jsonEscape(const std::string& s);
+
+/// Writes text to path (replacing it); throws as JsonObject::writeFile does.
+void writeTextFile(const std::string& path, const std::string& text);
 
 }  // namespace loopd::tools

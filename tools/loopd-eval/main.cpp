@@ -2,8 +2,10 @@
 // loopd-outliers and a loopd-solve stats file, the solver's rejections.
 #include <cstdio>
 #include <iostream>
+#include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "solvers/io/dataset_reader.h"
 #include "tools/common/cli.h"
@@ -22,7 +24,10 @@ const char* kUsage =
     "RPE: mean translation / rotation error of consecutive relative poses.\n"
     "--truth + --stats: precision and recall of the stats' \"rejected\" against the truth's\n"
     "\"outliers\" (and, for loopd-outliers --ambiguous truth, the stats' \"chosen\" against\n"
-    "\"true_choice\"). --graph (with --truth): chi2 of the estimate over the true edges only.\n";
+    "\"true_choice\"). --graph (with --truth): chi2 of the estimate over the true edges only.\n"
+    "Both files must hold the same pose ids; a truth file must hold \"outliers\" (edge indices\n"
+    "of --graph, when given), a stats file \"rejected\". --quiet: no summary on stdout (--json\n"
+    "is still written).\n";
 
 }  // namespace
 
@@ -59,10 +64,45 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "loopd-eval: %s\n\n%s", e.what(), kUsage);
     return 2;
   }
+  if (!stats.empty() && truth.empty()) {
+    std::fprintf(stderr, "loopd-eval: --stats needs --truth\n\n%s", kUsage);
+    return 2;
+  }
   try {
     const io::Dataset ref = tools::readVertices(reference);
     const io::Dataset est = tools::readVertices(estimate);
     const tools::TrajectoryErrors t = tools::trajectoryErrors(ref, est);
+    // Read (and check) every input before printing anything.
+    const char* kTruth = "a loopd-outliers truth file";
+    const char* kStats = "a loopd-solve stats file";
+    std::vector<std::int64_t> outliers, rejected, expected, chosen;
+    bool ambiguous = false;
+    if (!truth.empty()) {
+      outliers = tools::readIntArray(truth, "outliers", 0, kTruth);
+      ambiguous = tools::jsonHasKey(tools::readTextFile(truth), "true_choice");
+    }
+    std::optional<io::Dataset> g;
+    if (!graph.empty()) {
+      g = io::readDataset(graph);
+      const auto edges = static_cast<std::int64_t>(g->edges.size());
+      for (std::int64_t i : outliers)
+        if (i >= edges)
+          throw std::runtime_error(truth + ": outlier edge " + std::to_string(i) + " but " + graph +
+                                   " has " + std::to_string(edges) +
+                                   " edges (a truth file of another graph?)");
+    }
+    if (!stats.empty()) {
+      rejected = tools::readIntArray(stats, "rejected", 0, kStats);
+      if (ambiguous) {
+        expected = tools::readIntArray(truth, "true_choice", 0, kTruth);
+        chosen = tools::readIntArray(stats, "chosen", -1, kStats);  // -1: none
+        if (chosen.size() != expected.size())
+          throw std::runtime_error(stats + ": \"chosen\" has " + std::to_string(chosen.size()) +
+                                   " entries, " + truth + "'s \"true_choice\" " +
+                                   std::to_string(expected.size()));
+      }
+    }
+
     tools::JsonObject out;
     out.add("reference", reference)
         .add("estimate", estimate)
@@ -71,16 +111,15 @@ int main(int argc, char** argv) {
         .add("ate_max", t.ateMax)
         .add("rpe_trans", t.rpeTrans)
         .add("rpe_rot_deg", t.rpeRotDeg);
-    std::printf("poses %d  ATE rmse %.6g m (max %.6g)  RPE %.6g m / %.6g deg\n", t.poses, t.ateRmse,
-                t.ateMax, t.rpeTrans, t.rpeRotDeg);
-    std::vector<std::int64_t> outliers;
-    if (!truth.empty()) outliers = tools::jsonIntArray(tools::readTextFile(truth), "outliers");
-    if (!truth.empty() && !stats.empty()) {
-      const auto rejected = tools::jsonIntArray(tools::readTextFile(stats), "rejected");
+    if (!quiet)
+      std::printf("poses %d  ATE rmse %.6g m (max %.6g)  RPE %.6g m / %.6g deg\n", t.poses,
+                  t.ateRmse, t.ateMax, t.rpeTrans, t.rpeRotDeg);
+    if (!stats.empty()) {
       const tools::DecisionScores s = tools::scoreRejections(rejected, outliers);
-      std::printf("outliers %zu  rejected %zu  TP %d FP %d FN %d  precision %.4f  recall %.4f\n",
-                  outliers.size(), rejected.size(), s.truePositives, s.falsePositives,
-                  s.falseNegatives, s.precision, s.recall);
+      if (!quiet)
+        std::printf("outliers %zu  rejected %zu  TP %d FP %d FN %d  precision %.4f  recall %.4f\n",
+                    outliers.size(), rejected.size(), s.truePositives, s.falsePositives,
+                    s.falseNegatives, s.precision, s.recall);
       out.add("outliers", static_cast<std::int64_t>(outliers.size()))
           .add("rejected", static_cast<std::int64_t>(rejected.size()))
           .add("true_positives", s.truePositives)
@@ -89,35 +128,28 @@ int main(int argc, char** argv) {
           .add("precision", s.precision)
           .add("recall", s.recall);
       // Ambiguous measurements (loopd-outliers --ambiguous): the choice against the truth.
-      const std::string truthText = tools::readTextFile(truth);
-      if (truthText.find("\"true_choice\"") != std::string::npos) {
-        const auto expected = tools::jsonIntArray(truthText, "true_choice");
-        const auto chosen = tools::jsonIntArray(tools::readTextFile(stats), "chosen");
-        if (chosen.size() != expected.size())
-          throw std::runtime_error("stats \"chosen\" has " + std::to_string(chosen.size()) +
-                                   " entries, the truth " + std::to_string(expected.size()));
+      if (ambiguous) {
         int correct = 0, none = 0;
         for (size_t i = 0; i < chosen.size(); ++i) {
           correct += chosen[i] == expected[i];
           none += chosen[i] < 0;
         }
         const double accuracy = expected.empty() ? 1.0 : double(correct) / expected.size();
-        std::printf("ambiguous %zu  true alternative chosen %d (%.4f)  none chosen %d\n",
-                    expected.size(), correct, accuracy, none);
+        if (!quiet)
+          std::printf("ambiguous %zu  true alternative chosen %d (%.4f)  none chosen %d\n",
+                      expected.size(), correct, accuracy, none);
         out.add("ambiguous", static_cast<std::int64_t>(expected.size()))
             .add("chosen_correct", correct)
             .add("chosen_accuracy", accuracy)
             .add("chosen_none", none);
       }
     }
-    if (!graph.empty()) {
-      const io::Dataset g = io::readDataset(graph);
-      const double c = tools::inlierChi2(g, est, outliers);
-      std::printf("chi2 over true edges %.9g\n", c);
+    if (g) {
+      const double c = tools::inlierChi2(*g, est, outliers);
+      if (!quiet) std::printf("chi2 over true edges %.9g\n", c);
       out.add("inlier_chi2", c);
     }
     if (!json.empty()) out.writeFile(json);
-    (void)quiet;
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "loopd-eval: %s\n", e.what());

@@ -2,7 +2,8 @@
 // Scoring an estimate against a reference trajectory and, with a TRUTH.json from
 // loopd-outliers, the rejections of a robust solver.
 //   ATE: RMSE of positions after the rigid (rotation + translation, no scale) Umeyama/Horn
-//        alignment of the estimate onto the reference, over the poses both have.
+//        alignment of the estimate onto the reference, over all poses (both files must hold
+//        the same pose ids).
 //   RPE: mean over consecutive pose ids (both present) of the translation norm and rotation
 //        angle of (ΔT_ref)⁻¹·ΔT_est, ΔT = T_iᵀ… the relative pose from i to i+1.
 //   precision = TP / |rejected| (1 when nothing was rejected), recall = TP / |outliers|
@@ -24,7 +25,11 @@ struct TrajectoryErrors {
   int rpePairs = 0;
 };
 
-/// Throws std::invalid_argument when the datasets share fewer than 2 poses or mix 2D and 3D.
+/// The two must hold the same pose ids (landmarks are not compared). Throws
+/// std::invalid_argument naming the file (Dataset::path) when a reference pose is missing from
+/// the estimate or the estimate has a pose the reference lacks (how many, and the first id),
+/// when a pose is 2D in one and 3D in the other (or a file mixes both), or when there are
+/// fewer than 2 poses.
 TrajectoryErrors trajectoryErrors(const io::Dataset& reference, const io::Dataset& estimate);
 
 struct DecisionScores {
@@ -40,14 +45,24 @@ DecisionScores scoreRejections(const std::vector<std::int64_t>& rejected,
 double inlierChi2(const io::Dataset& graph, const io::Dataset& estimate,
                   const std::vector<std::int64_t>& outliers);
 
-/// The integer array under key in a flat JSON object (e.g. "outliers", "rejected"); empty if
-/// the key is absent. Throws std::runtime_error for a malformed array.
+/// The integer array under a top-level key of a JSON object (e.g. "outliers", "rejected");
+/// empty if the key is absent. Throws std::runtime_error when the text is not one JSON object
+/// or the value is not an array of integers that fit 64 bits.
 std::vector<std::int64_t> jsonIntArray(const std::string& json, const std::string& key);
+/// Whether the JSON object has the top-level key; throws as jsonIntArray for a text that is not
+/// one JSON object.
+bool jsonHasKey(const std::string& json, const std::string& key);
+/// The integer array under key in the JSON file path, which must be there and hold only
+/// integers >= minValue. Throws std::runtime_error("PATH: reason"); a missing key's reason
+/// ends "(not KIND?)" when kind is given (e.g. "a loopd-outliers truth file").
+std::vector<std::int64_t> readIntArray(const std::string& path, const std::string& key,
+                                       std::int64_t minValue, const std::string& kind = "");
 /// A number (or integer) field; fallback if absent.
 double jsonNumber(const std::string& json, const std::string& key, double fallback);
 /// The poses and landmarks of a g2o file that may hold only vertex lines (loopd-solve --out):
 /// VERTEX_SE2, VERTEX_SE3:QUAT, VERTEX_XY, VERTEX_TRACKXYZ; other lines are skipped. Throws
-/// std::runtime_error naming the file and line for a malformed vertex.
+/// std::runtime_error naming the file and line for a malformed vertex or a pose (landmark) id
+/// given twice (poses and landmarks may share ids, as Victoria Park's do).
 io::Dataset readVertices(const std::string& path);
 /// Reads a whole file; throws std::runtime_error naming it.
 std::string readTextFile(const std::string& path);

@@ -19,8 +19,10 @@
 #include <lcm/lcm-cpp.hpp>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 #include <string>
 #include <thread>
@@ -48,12 +50,13 @@ const char* kUsage =
     "usage: loopd-feed DATASET [--robots N] [--rate HZ] [--lcm-url URL] [--sender NAME]\n"
     "                  [--log OUT.lcmlog] [--channel-prefix P] [--interleave] [--poses N] "
     "[--quiet]\n"
-    "  --robots N        split the poses into N consecutive segments, one robot each (default 1)\n"
-    "  --rate HZ         poses per second (default 0 = as fast as possible)\n"
+    "  --robots N        split the poses into N (1-1000) consecutive segments, one robot each\n"
+    "                    (default 1)\n"
+    "  --rate HZ         poses per second, >= 0 (default 0 = as fast as possible)\n"
     "  --sender NAME     sender names are NAME0, NAME1, ... (default feed)\n"
     "  --log OUT         write an LCM log (replay with lcm-logplayer) instead of publishing\n"
     "  --interleave      robots publish round-robin instead of one segment after the other\n"
-    "  --poses N         only the first N poses (and the edges among them)\n";
+    "  --poses N         only the first N poses (N >= 1; and the edges among them)\n";
 
 Options parse(int argc, char** argv) {
   Options o;
@@ -64,10 +67,14 @@ Options parse(int argc, char** argv) {
       std::fputs(kUsage, stdout);
       std::exit(0);
     } else if (a == "--robots")
-      o.robots = std::stoi(val());
-    else if (a == "--rate")
-      o.rate = std::stod(val());
-    else if (a == "--lcm-url")
+      o.robots = static_cast<int>(tools::parseIntFlag(a, val(), 1, 1000));
+    else if (a == "--rate") {
+      const std::string v = val();
+      o.rate = tools::parseNumberFlag(a, v, 0.0, 1e9);
+      if (o.rate > 0 && o.rate < 1e-3)  // one pose in more than 1000 s: a typo, and no int64 step
+        throw std::invalid_argument("--rate takes 0 or a number in [0.001, 1e+09], got '" + v +
+                                    "'");
+    } else if (a == "--lcm-url")
       o.lcmUrl = val();
     else if (a == "--sender")
       o.sender = val();
@@ -76,7 +83,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--channel-prefix")
       o.prefix = val();
     else if (a == "--poses")
-      o.poses = std::stol(val());
+      o.poses = static_cast<long>(tools::parseIntFlag(a, val(), 1, 1000000000));
     else if (a == "--interleave")
       o.interleave = true;
     else if (a == "--quiet")
@@ -89,8 +96,6 @@ Options parse(int argc, char** argv) {
       throw std::invalid_argument("unexpected argument " + a);
   }
   if (o.dataset.empty()) throw std::invalid_argument("no DATASET");
-  if (o.robots < 1 || o.robots > 1000) throw std::invalid_argument("--robots must be 1..1000");
-  if (o.rate < 0) throw std::invalid_argument("--rate must be >= 0");
   return o;
 }
 
@@ -161,7 +166,8 @@ int run(const Options& o) {
       ev.channel = ch;
       ev.datalen = static_cast<int32_t>(b.size());
       ev.data = const_cast<std::uint8_t*>(b.data());
-      log->writeEvent(&ev);
+      if (log->writeEvent(&ev) != 0)
+        throw std::runtime_error("cannot write " + o.log + ": " + std::strerror(errno));
     };
   } else {
     lcm = std::make_unique<lcm::LCM>(o.lcmUrl);
@@ -212,6 +218,13 @@ int run(const Options& o) {
     }
     if (!o.quiet && (i + 1) % 1000 == 0)
       std::fprintf(stderr, "loopd-feed: %zu/%zu poses\n", i + 1, n);
+  }
+  if (log) {
+    // The events reach the file on the flush: a full disk shows here (or at the close).
+    std::FILE* f = log->getFilePtr();
+    if (std::fflush(f) != 0 || std::ferror(f))
+      throw std::runtime_error("cannot write " + o.log + ": " + std::strerror(errno));
+    log.reset();
   }
   std::int64_t batches = 0;
   for (auto& p : pubs) batches += p->batchesPublished();

@@ -66,12 +66,9 @@ int main(int argc, char** argv) {
       else if (a == "--covariances")
         cov = val();
       else if (a == "--until-quiet") {
-        quietSeconds = std::stod(val());
-        if (!std::isfinite(quietSeconds) || quietSeconds < 0)
-          throw std::invalid_argument("--until-quiet must be a number of seconds >= 0");
+        quietSeconds = tools::parseNumberFlag(a, val(), 0.0, 1e9);
       } else if (a == "--until-batches") {
-        untilBatches = std::stoll(val());
-        if (untilBatches <= 0) throw std::invalid_argument("--until-batches must be positive");
+        untilBatches = tools::parseIntFlag(a, val(), 1, 1000000000000LL);
       } else if (a == "--quiet")
         quiet = true;
       else

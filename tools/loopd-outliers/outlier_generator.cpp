@@ -91,7 +91,14 @@ OutlierResult addOutliers(const io::Dataset& input, const OutlierOptions& opt) {
   std::sort(ids.begin(), ids.end());
   const std::int64_t n = static_cast<std::int64_t>(ids.size());
   const int groupSize = opt.mode == OutlierMode::Group ? opt.groupSize : 1;
-  if (n < groupSize + 3) throw std::invalid_argument("too few poses for outliers");
+  // A group's pairs are (a + j, b + j), j < K, with b >= a + 2 and b + K - 1 <= n - 1: the
+  // smallest graph that holds one is a = 0, b = 2, n = K + 2 (n = 3 for a single pair).
+  if (n < groupSize + 2)
+    throw std::invalid_argument("too few poses for outliers: " + std::to_string(n) + ", " +
+                                (opt.mode == OutlierMode::Group
+                                     ? "groups of " + std::to_string(groupSize) + " need "
+                                     : std::string("a pair needs ")) +
+                                std::to_string(groupSize + 2));
 
   // The dataset's loop-closure scale and information.
   std::vector<const io::Edge*> loops, betweens;

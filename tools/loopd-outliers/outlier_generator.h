@@ -48,8 +48,8 @@ const char* outlierMeasurementName(OutlierMeasurement m);
 /// "random", "local", "group"; throws std::invalid_argument otherwise.
 OutlierMode outlierModeFromName(const std::string& name);
 
-/// Throws std::invalid_argument for a dataset with fewer than 4 poses, landmark-only data, or
-/// bad options.
+/// Throws std::invalid_argument for a dataset with fewer than K + 2 poses (group mode, K the
+/// group size; 3 otherwise), landmark-only data, or bad options.
 OutlierResult addOutliers(const io::Dataset& input, const OutlierOptions& options);
 
 /// TRUTH.json: {"input", "mode", "count", "seed", "group_size", "measurement" ("uniform" or
