@@ -1,6 +1,7 @@
 // loopd-outliers' generator and loopd-eval's metrics (library level), plus the two binaries
 // end to end on a small dataset.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -11,6 +12,7 @@
 #include <iterator>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "solvers/io/dataset_reader.h"
@@ -383,6 +385,87 @@ TEST(CompareScript, MergeIntoReplacesTheSameRunsAndAddsTheRest) {
   const std::string orphan = "/usr/bin/python3 " + kSource + "/tools/compare --rows " + dir +
                              "/rerun.csv > /dev/null 2>&1";
   EXPECT_NE(std::system(orphan.c_str()), 0) << "--rows without --merge-into is refused";
+}
+
+// A shell command's exit status (128 + the signal if it was killed).
+int exitStatus(const std::string& cmd) {
+  const int status = std::system(cmd.c_str());
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+// Arguments tools/compare can check before running anything are usage errors: exit status 2,
+// a message naming the option or file (no Python traceback), and nothing run (--out is not
+// even created). Datasets must be in --datasets-dir, modes and variants are those the tools'
+// --help lists (modes also as vertigo-MODE).
+TEST(CompareScript, BadArgumentsAreUsageErrorsBeforeAnyRun) {
+  const std::string dir = ::testing::TempDir() + "/compare_args";
+  ASSERT_EQ(std::system(("rm -rf " + dir + " && mkdir -p " + dir).c_str()), 0);
+  const std::string base = "/usr/bin/python3 " + kSource + "/tools/compare --build " + kBin +
+                           " --datasets-dir " + kDatasets +
+                           " --no-plots --datasets tinyGrid3D.g2o --modes random --counts 3"
+                           " --variants lm --out " +
+                           dir + "/out ";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"--counts abc", "--counts"},
+      {"--seeds x,y", "--seeds"},
+      {"--counts 1,-2", "--counts"},
+      {"--timeout 0", "--timeout"},
+      {"--replot " + dir + "/missing.csv", "missing.csv"},
+      {"--datasets nonexistent.g2o", "nonexistent.g2o"},
+      {"--modes bogus", "bogus"},
+      {"--modes vertigo-bogus", "vertigo-bogus"},
+      {"--variants lm,foo", "foo"}};
+  for (const auto& [args, named] : cases) {
+    const std::string log = dir + "/log.txt";
+    EXPECT_EQ(exitStatus(base + args + " > /dev/null 2> " + log), 2) << args;
+    const std::string err = readTextFile(log);
+    EXPECT_NE(err.find("compare: error: "), std::string::npos) << args << ":\n" << err;
+    EXPECT_NE(err.find(named), std::string::npos) << args << ":\n" << err;
+    EXPECT_EQ(err.find("Traceback"), std::string::npos) << args << ":\n" << err;
+  }
+  EXPECT_NE(exitStatus("test -e " + dir + "/out"), 0) << "nothing ran";
+}
+
+// A tool that fails says why: its own error line, not the last line of the usage text it
+// prints after it. A failed solve is a row of status error (exit status 0: failures are
+// results); a setting that could not be set up (loopd-outliers failed) has no rows, so the
+// run exits 1, after writing the others. The build here wraps the real tools to fail so.
+TEST(CompareScript, FailuresNameTheToolsReason) {
+  const std::string dir = ::testing::TempDir() + "/compare_fail";
+  const std::string tools = dir + "/build/tools";
+  ASSERT_EQ(std::system(("rm -rf " + dir + " && mkdir -p " + tools + " && ln -s " + kBin +
+                         "/tools/loopd-eval " + tools + "/")
+                            .c_str()),
+            0);
+  std::ofstream(tools + "/loopd-solve")
+      << "#!/bin/sh\ncase \" $* \" in *\" --solver dcs \"*) exec " << kBin
+      << "/tools/loopd-solve \"$@\" --max-iterations 0 ;; esac\nexec " << kBin
+      << "/tools/loopd-solve \"$@\"\n";
+  std::ofstream(tools + "/loopd-outliers")
+      << "#!/bin/sh\ncase \" $* \" in *\" --seed 2 \"*) exec " << kBin
+      << "/tools/loopd-outliers \"$@\" --group-size 0 ;; esac\nexec " << kBin
+      << "/tools/loopd-outliers \"$@\"\n";
+  ASSERT_EQ(
+      std::system(("chmod +x " + tools + "/loopd-solve " + tools + "/loopd-outliers").c_str()), 0);
+  const std::string cmd = "/usr/bin/python3 " + kSource + "/tools/compare --build " + dir +
+                          "/build --datasets-dir " + kDatasets +
+                          " --no-plots --datasets tinyGrid3D.g2o --modes random --counts 3"
+                          " --variants lm,dcs --out " +
+                          dir + "/out > /dev/null 2> " + dir + "/log.txt --seeds ";
+  EXPECT_EQ(exitStatus(cmd + "1"), 0);
+  std::string log = readTextFile(dir + "/log.txt");
+  EXPECT_NE(log.find("dcs: error: loopd-solve: --max-iterations"), std::string::npos) << log;
+  std::vector<std::string> lines = csvLines(dir + "/out/results.csv");
+  ASSERT_EQ(lines.size(), 3u);
+  EXPECT_EQ(lines[1].rfind("tinyGrid3D,random,3,1,lm,ok,", 0), 0u) << lines[1];
+  EXPECT_EQ(lines[2].rfind("tinyGrid3D,random,3,1,dcs,error,", 0), 0u) << lines[2];
+
+  EXPECT_EQ(exitStatus(cmd + "1,2"), 1);
+  log = readTextFile(dir + "/log.txt");
+  EXPECT_NE(log.find("loopd-outliers: --group-size"), std::string::npos) << log;
+  EXPECT_NE(log.find("could not be set up"), std::string::npos) << log;
+  lines = csvLines(dir + "/out/results.csv");
+  EXPECT_EQ(lines.size(), 3u) << "seed 1's rows are written";
 }
 
 }  // namespace
