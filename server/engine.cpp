@@ -209,17 +209,36 @@ void Engine::run(const std::atomic<bool>& stop) {
 
 std::int64_t Engine::replay(const std::string& path, bool rejournal, long* validBytes) {
   replaying_ = !rejournal;
-  std::int64_t n = 0;
-  n = readJournal(
+  struct Done {  // a journal that turns out damaged throws: the engine is left live
+    bool& replaying;
+    ~Done() { replaying = false; }
+  } done{replaying_};
+  const std::int64_t n = readJournal(
       path,
       [&](const std::string& channel, const void* data, int size) {
-        if (channel != pub_.channels().factors) return;  // journals hold only batches
-        auto m = std::make_shared<Inbound>();
-        m->channel = channel;
-        m->bytes.assign(static_cast<const std::uint8_t*>(data),
-                        static_cast<const std::uint8_t*>(data) + size);
-        handleFactors(m, !rejournal);
-        if (staged_.size() >= 64) flush();
+        const auto* bytes = static_cast<const std::uint8_t*>(data);
+        if (channel == pub_.channels().factors) {  // an applied batch
+          auto m = std::make_shared<Inbound>();
+          m->channel = channel;
+          m->bytes.assign(bytes, bytes + size);
+          handleFactors(m, !rejournal);
+          if (staged_.size() >= 64) flush();
+        } else if (channel == pub_.channels().command) {  // a RESET
+          loopd::command_t c{};
+          if (c.decode(data, 0, size) != size || c.command != loopd::command_t::RESET) return;
+          flush();
+          if (rejournal && journal_) journal_->appendRecord(channel, data, size, nowUtime());
+          resetAll();
+          ++updateSeq_;
+        } else if (channel == pub_.channels().error) {  // a number consumed, not applied
+          E e{};
+          if (e.decode(data, 0, size) != size || e.sender.empty() || e.sequence < 1) return;
+          if (!sessions_.receive(e.sender, e.sequence)) return;
+          if (rejournal && journal_)
+            journal_->appendConsumed(channel, e.sender, e.sequence, e.code, e.reason, nowUtime());
+          std::lock_guard<std::mutex> l(countersMu_);
+          ++(e.code == E::HELD_EXPIRED ? counters_.expired : counters_.rejected);
+        }
       },
       validBytes);
   retryHolds();

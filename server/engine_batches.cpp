@@ -22,8 +22,26 @@ using E = loopd::error_t;
 using W = loopd::factor_t;
 using Clock = std::chrono::steady_clock;
 
+namespace {
+
+// The journal's record of a batch number consumed without being applied (refused, expired),
+// so that a resume knows it (no gap, a resend is a duplicate). A batch without a usable
+// identity is refused without consuming a number (handleFactors): no record.
+void journalConsumed(Journal* journal, bool replaying, const Publisher& pub,
+                     const loopd::factor_batch_t& b, std::int8_t code, const std::string& reason) {
+  if (!journal || replaying || b.sender.empty() || b.sender.size() > 63 || b.sequence < 1) return;
+  if (!journal->appendConsumed(pub.channels().error, b.sender, b.sequence, code, reason,
+                               nowUtime()))
+    spdlog::error("journal {}: write failed", journal->path());
+}
+
+}  // namespace
+
 void Engine::reject(const loopd::factor_batch_t& b, const std::vector<Issue>& issues,
                     const std::string& channel) {
+  // Its number is consumed: journaled (before the errors report it) so that a resume knows.
+  if (!issues.empty())
+    journalConsumed(journal_, replaying_, pub_, b, issues.front().code, issues.front().reason);
   for (const auto& i : issues) {
     spdlog::warn("refused {}", describe(b, i));
     pub_.error(b.sender, b.sequence, 0, i.factorId, i.code, i.reason, channel);
@@ -141,13 +159,16 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     }
   }
   // A robot never seen starts at the origin of its own frame: its lowest pose in the batch
-  // (unless the front-end gave values, or earlier batches of this sender are missing).
+  // (unless the front-end gave values, or earlier batches of this sender are missing). Only its
+  // own factors introduce it: a closure from another robot to a pose of a robot not yet heard
+  // from waits for that robot (else that pose became its origin, and its own first batches,
+  // held behind it, expired).
   std::map<std::uint32_t, Key> lowestNew;
   std::set<std::uint32_t> robotsWithGuess;
   for (int s = 0; s < guess.size(); ++s)
     if (keyKind(guess.key(s)) == KeyKind::Pose) robotsWithGuess.insert(keyRobot(guess.key(s)));
   for (const auto& f : b.factors)
-    for (int i = 0; i < f.num_keys; ++i) {
+    for (int i = 0; i < f.num_keys && !isInterRobot(f); ++i) {
       const Key k = toKey(f.keys[static_cast<size_t>(i)]);
       if (keyKind(k) != KeyKind::Pose || robots_.count(keyRobot(k)) ||
           robotsWithGuess.count(keyRobot(k)))
@@ -329,6 +350,7 @@ void Engine::expireHolds(bool all) {
                                " s waiting for " + keys + (tooMany ? " (hold queue full)" : "") +
                                ": dropped";
     spdlog::warn("sender '{}' seq {}: {}", b.sender, b.sequence, reason);
+    journalConsumed(journal_, replaying_, pub_, b, E::HELD_EXPIRED, reason);
     pub_.error(b.sender, b.sequence, 0, -1, E::HELD_EXPIRED, reason, h.d.raw->channel);
     holds_.pop_front();
     std::lock_guard<std::mutex> l(countersMu_);
@@ -375,17 +397,6 @@ void Engine::commit(Staged& s) {
 
 void Engine::flush() {
   if (staged_.empty()) return;
-  // Journal first: what is accepted survives a crash during the update.
-  for (auto& s : staged_) {
-    if (s.d.replayed || !journal_) continue;
-    if (!journal_->append(s.d.raw->channel, s.d.raw->bytes.data(),
-                          static_cast<int>(s.d.raw->bytes.size()), nowUtime()))
-      spdlog::error("journal {}: write failed", journal_->path());
-    else {
-      std::lock_guard<std::mutex> l(countersMu_);
-      ++counters_.journaled;
-    }
-  }
   // One update for the round; factors and groups removed within the round cancel out.
   BackendUpdate all;
   std::vector<FactorId> groupRemovals;
@@ -424,16 +435,40 @@ void Engine::flush() {
   std::vector<Staged> round;
   round.swap(staged_);
   stagedValues_ = Values();
+  // Journaled once applied, before anything reports it (afterUpdate): the journal holds only
+  // what was applied, and what was reported survives a kill -9. A batch being applied when
+  // the server died is in no status: its front-end's resend applies it.
+  auto journalApplied = [&](const Staged& s) {
+    if (s.d.replayed || !journal_) return;
+    if (!journal_->append(s.d.raw->channel, s.d.raw->bytes.data(),
+                          static_cast<int>(s.d.raw->bytes.size()), nowUtime())) {
+      spdlog::error("journal {}: write failed", journal_->path());
+      return;
+    }
+    std::lock_guard<std::mutex> l(countersMu_);
+    ++counters_.journaled;
+  };
+  // Refused by the backend (INTERNAL): its number is consumed like any refused batch's.
+  auto refuse = [&](const Staged& s, const std::string& reason) {
+    journalConsumed(journal_, replaying_, pub_, *s.d.batch, E::INTERNAL, reason);
+    pub_.error(s.d.batch->sender, s.d.batch->sequence, 0, -1, E::INTERNAL, reason,
+               s.d.raw->channel);
+    std::lock_guard<std::mutex> l(countersMu_);
+    ++counters_.internalErrors;
+    ++counters_.rejected;
+  };
   if (ok) {
-    for (auto& s : round) commit(s);
+    for (auto& s : round) {
+      journalApplied(s);
+      commit(s);
+    }
   } else {
     for (auto it = round.rbegin(); it != round.rend(); ++it) undo(*it);
     std::set<Key> movedSet;
     for (auto& s : round) {
       std::vector<Key> waiting;
       if (stage(s.d, waiting) != StageResult::Staged) {
-        pub_.error(s.d.batch->sender, s.d.batch->sequence, 0, -1, E::INTERNAL,
-                   "batch could not be initialised on retry; not applied", s.d.raw->channel);
+        refuse(s, "batch could not be initialised on retry; not applied");
         continue;
       }
       Staged one = std::move(staged_.back());
@@ -441,17 +476,14 @@ void Engine::flush() {
       stagedValues_ = Values();
       try {
         for (Key k : applyUpdate(one.update, one.groupRemovals)) movedSet.insert(k);
+        journalApplied(one);
         commit(one);
       } catch (const std::exception& e) {
         undo(one);
         spdlog::error("sender '{}' seq {}: backend refused the batch: {}", s.d.batch->sender,
                       s.d.batch->sequence, e.what());
-        pub_.error(
-            s.d.batch->sender, s.d.batch->sequence, 0, -1, E::INTERNAL,
-            std::string("the solver refused the batch (not applied; graph intact): ") + e.what(),
-            s.d.raw->channel);
-        std::lock_guard<std::mutex> l(countersMu_);
-        ++counters_.internalErrors;
+        refuse(s, std::string("the solver refused the batch (not applied; graph intact): ") +
+                      e.what());
       }
     }
     moved.assign(movedSet.begin(), movedSet.end());

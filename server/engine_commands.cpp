@@ -5,14 +5,20 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <charconv>
+#include <cstdio>
+#include <limits>
+#include <map>
 
 #include "loopd/covariance_t.hpp"
 #include "loopd/error_t.hpp"
 #include "robust/backend_registry.h"
 #include "robust/mh_backend.h"
+#include "server/anchored_between_factor.h"
 #include "server/fingerprint.h"
 #include "server/wire.h"
 #include "server/wire_factors.h"
+#include "solvers/factors/landmark_factors.h"
 #include "solvers/io/estimate_writer.h"
 
 namespace loopd::server {
@@ -39,6 +45,138 @@ void feedWhole(Backend& next, BackendUpdate all) {
     next.optimize();
   }
   if (!groups.ambiguous.empty()) next.update(groups);
+}
+
+// A command argument for logs and reasons: at most 80 characters of it.
+std::string clipped(const std::string& s) {
+  if (s.size() <= 80) return s;
+  return s.substr(0, 80) + "... (" + std::to_string(s.size()) + " characters)";
+}
+
+// A decimal number of digits only (no sign, spaces or other characters), 0 … max.
+bool parseDecimal(const std::string& s, std::int64_t max, std::int64_t& out) {
+  if (s.empty() || s.front() < '0' || s.front() > '9') return false;
+  std::int64_t v = 0;
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (r.ec != std::errc() || r.ptr != s.data() + s.size() || v > max) return false;
+  out = v;
+  return true;
+}
+
+// --- SAVE_SNAPSHOT ------------------------------------------------------------------------
+// g2o has one id space: each robot's poses, then each robot's landmarks, get a block of ids
+// (robots in ascending order), the variable's index added to the block's first id. One
+// robot without landmarks keeps its pose indices as ids.
+class SnapshotIds {
+ public:
+  explicit SnapshotIds(const Values& est) {
+    std::map<std::pair<bool, std::uint32_t>, std::uint64_t> top;  // (landmark?, robot) → max
+    for (Key k : est.keys()) {
+      if (keyKind(k) != KeyKind::Pose && keyKind(k) != KeyKind::Landmark) continue;
+      auto& m = top[{keyKind(k) == KeyKind::Landmark, keyRobot(k)}];
+      m = std::max(m, keyIndex(k));
+    }
+    std::uint64_t next = 0;
+    for (const auto& [block, maxIndex] : top) {
+      if (next > kMaxKeyIndex || maxIndex > kMaxKeyIndex - next)
+        throw std::runtime_error(
+            "the snapshot's ids would exceed " + std::to_string(kMaxKeyIndex) +
+            " (what g2o readers keep); indices are too large to give each robot a block");
+      first_[block] = next;
+      next += maxIndex + 1;
+    }
+  }
+  std::int64_t operator()(Key k) const {
+    return static_cast<std::int64_t>(first_.at({keyKind(k) == KeyKind::Landmark, keyRobot(k)}) +
+                                     keyIndex(k));
+  }
+  // "# robot 1 poses: id = 6 + index" per block, for the end of the file.
+  std::string legend() const {
+    std::string out;
+    for (const auto& [block, first] : first_)
+      out += "# robot " + std::to_string(block.second) + (block.first ? " landmarks" : " poses") +
+             ": id = " + std::to_string(first) + " + index\n";
+    return out;
+  }
+
+ private:
+  std::map<std::pair<bool, std::uint32_t>, std::uint64_t> first_;
+};
+
+// Ω of a pose–landmark factor, which keeps only √Ω: at an identity pose ∂e/∂p = √Ω.
+template <int N>
+Eigen::Matrix<double, N, N> landmarkInformation(const Factor& f) {
+  Values v;
+  const Key pose = makeKey(0, KeyKind::Pose, 0), point = makeKey(0, KeyKind::Landmark, 0);
+  if (N == 2) {
+    v.insert(pose, SE2());
+    v.insertPoint2(point, Vec2(1, 0));
+  } else {
+    v.insert(pose, SE3());
+    v.insertPoint3(point, Vec3(1, 0, 0));
+  }
+  const double* x[2] = {v.data(0), v.data(1)};
+  JacobianBlock jp{};
+  double* J[2] = {nullptr, jp.data()};
+  double r[kMaxResidualDim];
+  f.evaluate(x, r, J);
+  const Eigen::Map<const Eigen::Matrix<double, N, N>> sqrtInfo(jp.data());
+  const Eigen::Matrix<double, N, N> info = sqrtInfo.transpose() * sqrtInfo;
+  return 0.5 * (info + info.transpose());
+}
+
+// A factor as a g2o edge between snapshot ids (measurements are relative, so they hold in any
+// frame: an anchored inter-robot factor is the between of its two common-frame poses). False
+// for what g2o cannot express: priors, bearing-range.
+bool toG2oEdge(const Factor& f, const SnapshotIds& id, io::Edge& e) {
+  e = io::Edge();
+  auto se2 = [&](Key a, Key b, const SE2& z, const Eigen::Matrix3d& info) {
+    e.type = io::EdgeType::BetweenSE2;
+    e.from = id(a);
+    e.to = id(b);
+    e.measurement[0] = z.x;
+    e.measurement[1] = z.y;
+    e.measurement[2] = z.theta;
+    e.information.topLeftCorner<3, 3>() = info;
+  };
+  auto se3 = [&](Key a, Key b, const SE3& z, const Mat6& info) {
+    e.type = io::EdgeType::BetweenSE3;
+    e.from = id(a);
+    e.to = id(b);
+    z.toTranslationQuaternion(e.measurement.data());
+    e.information = info;
+  };
+  if (const auto* b = dynamic_cast<const BetweenFactorSE2*>(&f)) {
+    se2(f.key(0), f.key(1), b->measured(), b->information());
+  } else if (const auto* b = dynamic_cast<const BetweenFactorSE3*>(&f)) {
+    se3(f.key(0), f.key(1), b->measured(), b->information());
+  } else if (const auto* a = dynamic_cast<const AnchoredBetweenFactorSE2*>(&f)) {
+    se2(f.key(1), f.key(3), a->measured(), a->information());
+  } else if (const auto* a = dynamic_cast<const AnchoredBetweenFactorSE3*>(&f)) {
+    se3(f.key(1), f.key(3), a->measured(), a->information());
+  } else if (const auto* p = dynamic_cast<const PosePointFactor2*>(&f)) {
+    e.type = io::EdgeType::PosePoint2;
+    e.from = id(f.key(0));
+    e.to = id(f.key(1));
+    e.measurement[0] = p->measured().x();
+    e.measurement[1] = p->measured().y();
+    e.information.topLeftCorner<2, 2>() = landmarkInformation<2>(f);
+  } else if (const auto* p = dynamic_cast<const PosePointFactor3*>(&f)) {
+    e.type = io::EdgeType::PosePoint3;
+    e.from = id(f.key(0));
+    e.to = id(f.key(1));
+    for (int i = 0; i < 3; ++i) e.measurement[static_cast<size_t>(i)] = p->measured()[i];
+    e.information.topLeftCorner<3, 3>() = landmarkInformation<3>(f);
+  } else {
+    return false;
+  }
+  return true;
+}
+
+void appendText(const std::string& path, const std::string& text) {
+  std::FILE* f = std::fopen(path.c_str(), "ab");
+  const bool ok = f && std::fwrite(text.data(), 1, text.size(), f) == text.size();
+  if ((f && std::fclose(f) != 0) || !ok) throw std::runtime_error("cannot append to " + path);
 }
 
 }  // namespace
@@ -96,10 +234,11 @@ void Engine::handleCommand(const Inbound& m) {
   int used = -1;
   if (m.bytes.size() >= 8 && readFingerprint(m.bytes.data()) != loopd::command_t::getHash()) {
     const std::string name = fingerprintName(readFingerprint(m.bytes.data()));
-    pub_.error("", 0, 0, -1, E::WRONG_FINGERPRINT,
-               "fingerprint does not match command_t" +
-                   (name.empty() ? std::string() : " (it is a " + name + ")"),
-               m.channel);
+    const std::string why =
+        "fingerprint does not match command_t" +
+        (name.empty() ? std::string(" (unknown type)") : " (it is a " + name + ")");
+    spdlog::warn("{}: {}", m.channel, why);
+    pub_.error("", 0, 0, -1, E::WRONG_FINGERPRINT, why, m.channel);
     return;
   }
   try {
@@ -108,22 +247,67 @@ void Engine::handleCommand(const Inbound& m) {
     used = -1;
   }
   if (used < 0 || used != static_cast<int>(m.bytes.size())) {
-    pub_.error("", 0, 0, -1, E::DECODE_FAILED, "command_t does not decode", m.channel);
+    const std::string why = used < 0 ? "command_t does not decode (truncated or corrupt)"
+                                     : "command_t followed by " +
+                                           std::to_string(static_cast<int>(m.bytes.size()) - used) +
+                                           " trailing bytes";
+    spdlog::warn("{}: {}", m.channel, why);
+    pub_.error("", 0, 0, -1, E::DECODE_FAILED, why, m.channel);
     return;
   }
   spdlog::info("command {} from '{}' (request {}) '{}'", static_cast<int>(c.command), c.sender,
-               c.request_id, c.argument);
+               c.request_id, clipped(c.argument));
   using C = loopd::command_t;
+  // Checks every command shares (lcmtypes/README.md, command_t): a command that fails one is
+  // refused before anything runs (nothing journaled, changed or replied but the error).
+  if (c.command < C::RESET || c.command > C::REQUEST_STATUS) {
+    commandError(c, E::INVALID_FIELD, "unknown command " + std::to_string(c.command), m.channel);
+    return;
+  }
+  if (c.request_id <= 0) {
+    commandError(c, E::INVALID_FIELD, "request_id must be > 0, not " + std::to_string(c.request_id),
+                 m.channel);
+    return;
+  }
+  if (c.argument.size() > static_cast<size_t>(C::MAX_ARGUMENT_LENGTH)) {
+    commandError(c, E::LIMIT_EXCEEDED,
+                 "argument of " + std::to_string(c.argument.size()) + " characters exceeds " +
+                     std::to_string(C::MAX_ARGUMENT_LENGTH),
+                 m.channel);
+    return;
+  }
+  if (c.keys.size() > static_cast<size_t>(C::MAX_KEYS)) {
+    commandError(c, E::LIMIT_EXCEEDED,
+                 std::to_string(c.keys.size()) + " keys exceed " + std::to_string(C::MAX_KEYS),
+                 m.channel);
+    return;
+  }
+  if (!c.keys.empty() && c.command != C::REQUEST_COVARIANCE) {
+    commandError(c, E::COMMAND_FAILED, "keys are for REQUEST_COVARIANCE only", m.channel);
+    return;
+  }
+  if (!c.argument.empty() &&
+      (c.command == C::RESET || c.command == C::OPTIMIZE || c.command == C::REQUEST_STATUS)) {
+    commandError(c, E::COMMAND_FAILED, "takes no argument, not '" + clipped(c.argument) + "'",
+                 m.channel);
+    return;
+  }
   try {
     switch (c.command) {
       case C::RESET:
+        // Journaled (before anything reports it) so that --resume forgets what it forgot.
+        if (journal_ && !replaying_ &&
+            !journal_->appendRecord(m.channel, m.bytes.data(), static_cast<int>(m.bytes.size()),
+                                    nowUtime()))
+          spdlog::error("journal {}: write failed", journal_->path());
         resetAll();
         ++updateSeq_;
         publishStatus(c.request_id, true);
         return;
       case C::SWITCH_SOLVER: {
         if (!isBackendName(c.argument)) {
-          commandError(c, E::COMMAND_FAILED, "unknown solver '" + c.argument + "'", m.channel);
+          commandError(c, E::COMMAND_FAILED, "unknown solver '" + clipped(c.argument) + "'",
+                       m.channel);
           return;
         }
         rebuildBackend(c.argument);
@@ -132,27 +316,30 @@ void Engine::handleCommand(const Inbound& m) {
         return;
       }
       case C::REQUEST_COVARIANCE: {
+        const bool joint = c.argument.empty() || c.argument == "joint";
+        if (!joint && c.argument != "marginals") {
+          commandError(c, E::COMMAND_FAILED,
+                       "argument must be \"\", \"joint\" or \"marginals\", not '" +
+                           clipped(c.argument) + "'",
+                       m.channel);
+          return;
+        }
+        if (c.keys.empty()) {
+          commandError(c, E::COMMAND_FAILED, "REQUEST_COVARIANCE without keys", m.channel);
+          return;
+        }
         std::vector<Key> keys;
         for (const auto& k : c.keys) {
-          std::string why;
-          const Key key = toKey(k);
-          if (k.robot < 0 || k.index < 0 || (k.kind != 0 && k.kind != 1) ||
-              !backend_->estimate().contains(key)) {
+          // Out-of-range fields would alias another variable once packed into a Key.
+          if (k.robot < 0 || static_cast<std::uint32_t>(k.robot) > kMaxRobotId || k.index < 0 ||
+              static_cast<std::uint64_t>(k.index) > kMaxKeyIndex ||
+              (k.kind != loopd::key_t::POSE && k.kind != loopd::key_t::LANDMARK) ||
+              !backend_->estimate().contains(toKey(k))) {
             commandError(c, E::UNKNOWN_KEY, "key " + wireKeyName(k) + " is not in the graph",
                          m.channel);
             return;
           }
-          keys.push_back(key);
-        }
-        if (keys.empty()) {
-          commandError(c, E::COMMAND_FAILED, "REQUEST_COVARIANCE without keys", m.channel);
-          return;
-        }
-        const bool joint = c.argument.empty() || c.argument == "joint";
-        if (!joint && c.argument != "marginals") {
-          commandError(c, E::COMMAND_FAILED, "argument must be \"\", \"joint\" or \"marginals\"",
-                       m.channel);
-          return;
+          keys.push_back(toKey(k));
         }
         std::vector<int> dims;
         int D = 0;
@@ -196,48 +383,131 @@ void Engine::handleCommand(const Inbound& m) {
       case C::REQUEST_ESTIMATE: {
         int robot = -1;
         if (!c.argument.empty()) {
-          try {
-            robot = std::stoi(c.argument);
-          } catch (const std::exception&) {
-            commandError(c, E::COMMAND_FAILED, "argument must be a robot id", m.channel);
+          std::int64_t r = -1;
+          if (!parseDecimal(c.argument, kMaxRobotId, r) ||
+              !robots_.count(static_cast<std::uint32_t>(r))) {
+            commandError(c, E::COMMAND_FAILED,
+                         "argument must be \"\" or the decimal id of a robot in the graph, not '" +
+                             clipped(c.argument) + "'",
+                         m.channel);
             return;
           }
+          robot = static_cast<int>(r);
         }
         publishEstimates(nullptr, c.request_id, robot);
         return;
       }
       case C::SAVE_SNAPSHOT: {
-        io::Dataset ds;
-        ds.path = c.argument;
-        const Values& est = backend_->estimate();
-        std::vector<Key> keys = est.keys();
-        std::sort(keys.begin(), keys.end());
-        for (Key k : keys) {
-          const int s = est.slot(k);
-          io::Vertex v;
-          v.id = static_cast<std::int64_t>(keyIndex(k));
-          std::vector<double> common;
-          if (keyKind(k) == KeyKind::Pose) {
-            if (!commonFramePose(k, common)) continue;
-            v.type = est.type(s) == VarType::SE3 ? io::VertexType::SE3 : io::VertexType::SE2;
-            std::copy(common.begin(), common.end(), v.value.begin());
-            ds.is3d |= v.type == io::VertexType::SE3;
-            ds.poses.push_back(v);
-          } else if (keyKind(k) == KeyKind::Landmark) {
-            v.type =
-                est.type(s) == VarType::Point3 ? io::VertexType::Point3 : io::VertexType::Point2;
-            for (int i = 0; i < varDim(est.type(s)); ++i)
-              v.value[static_cast<size_t>(i)] = est.data(s)[i];
-            ds.landmarks.push_back(v);
-          }
+        // The graph and estimate as g2o (README, Snapshots): vertices in the frame the
+        // estimates are published in, ids from SnapshotIds, the factors g2o can express as
+        // edges and the ambiguous groups as HYPOTHESES; priors and bearing-range are left out.
+        if (c.argument.empty()) {
+          commandError(c, E::COMMAND_FAILED, "argument must be a path", m.channel);
+          return;
         }
+        const Values& est = backend_->estimate();
+        std::unique_ptr<SnapshotIds> ids;
         try {
-          io::writeG2oVertices(c.argument, ds);
+          ids = std::make_unique<SnapshotIds>(est);
         } catch (const std::exception& e) {
           commandError(c, E::COMMAND_FAILED, std::string("cannot write snapshot: ") + e.what(),
                        m.channel);
           return;
         }
+        io::Dataset ds;
+        ds.path = c.argument;
+        std::vector<Key> keys = est.keys();
+        std::sort(keys.begin(), keys.end());
+        for (Key k : keys) {
+          const int s = est.slot(k);
+          io::Vertex v;
+          std::vector<double> common;
+          if (keyKind(k) == KeyKind::Pose) {
+            if (!commonFramePose(k, common)) continue;
+            v.id = (*ids)(k);
+            v.type = est.type(s) == VarType::SE3 ? io::VertexType::SE3 : io::VertexType::SE2;
+            std::copy(common.begin(), common.end(), v.value.begin());
+            ds.is3d |= v.type == io::VertexType::SE3;
+            ds.poses.push_back(v);
+          } else if (keyKind(k) == KeyKind::Landmark) {
+            // Through its namespace robot's anchor, as publishEstimates does.
+            const std::uint32_t r = keyRobot(k);
+            const bool anchored = robotJoined(r) && est.contains(anchorKey(r));
+            v.id = (*ids)(k);
+            if (est.type(s) == VarType::Point3) {
+              v.type = io::VertexType::Point3;
+              const Vec3 p =
+                  anchored ? se3Of(est, anchorKey(r)).transform(est.point3(s)) : est.point3(s);
+              for (int i = 0; i < 3; ++i) v.value[static_cast<size_t>(i)] = p[i];
+            } else {
+              v.type = io::VertexType::Point2;
+              const Vec2 p =
+                  anchored ? se2Of(est, anchorKey(r)).transform(est.point2(s)) : est.point2(s);
+              v.value[0] = p.x();
+              v.value[1] = p.y();
+            }
+            ds.landmarks.push_back(v);
+          }
+        }
+        std::map<std::string, int> skipped;  // the senders' factors g2o cannot express
+        int gauge = 0;                       // the server's own priors (first poses, anchors)
+        for (const auto& [fid, f] : live_) {
+          io::Edge e;
+          if (toG2oEdge(*f, *ids, e)) {
+            e.index = static_cast<int>(ds.edges.size());
+            ds.edges.push_back(e);
+          } else if (owners_.count(fid)) {
+            ++skipped[f->typeName()];
+          } else {
+            ++gauge;
+          }
+        }
+        int skippedGroups = 0;
+        for (const auto& [gid, g] : groups_) {
+          std::vector<io::Edge> alts;
+          for (const auto& a : g.factor.alternatives) {
+            io::Edge e;
+            if (!toG2oEdge(*a, *ids, e)) break;
+            alts.push_back(e);
+          }
+          if (alts.size() != g.factor.alternatives.size()) {
+            ++skippedGroups;
+            continue;
+          }
+          io::HypothesisGroup h;
+          h.firstEdge = static_cast<int>(ds.edges.size());
+          h.count = static_cast<int>(alts.size());
+          h.null = g.factor.nullHypothesis;
+          ds.hypotheses.push_back(h);
+          for (auto& e : alts) {
+            e.index = static_cast<int>(ds.edges.size());
+            ds.edges.push_back(e);
+          }
+        }
+        std::string notes;
+        for (const auto& [type, n] : skipped)
+          notes += (notes.empty() ? "" : ", ") + std::to_string(n) + " " + type;
+        if (skippedGroups > 0)
+          notes += (notes.empty() ? "" : ", ") + std::to_string(skippedGroups) +
+                   " ambiguous groups with bearing-range alternatives";
+        try {
+          io::writeG2oGraph(c.argument, ds);
+          appendText(c.argument,
+                     "# loopd snapshot: " + std::to_string(ds.poses.size()) + " poses, " +
+                         std::to_string(ds.landmarks.size()) + " landmarks, " +
+                         std::to_string(ds.edges.size()) + " edges (update " +
+                         std::to_string(updateSeq_) + ")\n" + ids->legend() +
+                         (notes.empty() ? "" : "# not written (no g2o form): " + notes + "\n"));
+        } catch (const std::exception& e) {
+          commandError(c, E::COMMAND_FAILED, std::string("cannot write snapshot: ") + e.what(),
+                       m.channel);
+          return;
+        }
+        if (!notes.empty())
+          spdlog::warn("snapshot {}: not written (g2o has no form for them): {}", c.argument,
+                       notes);
+        spdlog::info("snapshot {}: {} poses, {} landmarks, {} edges ({} gauge priors left out)",
+                     c.argument, ds.poses.size(), ds.landmarks.size(), ds.edges.size(), gauge);
         publishStatus(c.request_id, false);
         return;
       }
@@ -256,19 +526,15 @@ void Engine::handleCommand(const Inbound& m) {
         // status with the top min(n, MAX_HYPOTHESES) of them. Without mh: rank 0 only.
         int n = loopd::status_t::MAX_HYPOTHESES;
         if (!c.argument.empty()) {
-          size_t used = 0;
-          try {
-            n = std::stoi(c.argument, &used);
-          } catch (const std::exception&) {
-            used = 0;
-          }
-          if (used != c.argument.size() || n < 1) {
-            commandError(
-                c, E::COMMAND_FAILED,
-                "argument must be \"\" or a number of hypotheses >= 1, not '" + c.argument + "'",
-                m.channel);
+          std::int64_t v = 0;
+          if (!parseDecimal(c.argument, std::numeric_limits<int>::max(), v) || v < 1) {
+            commandError(c, E::COMMAND_FAILED,
+                         "argument must be \"\" or a decimal number of hypotheses >= 1, not '" +
+                             clipped(c.argument) + "'",
+                         m.channel);
             return;
           }
+          n = static_cast<int>(v);
         }
         if (const auto* mh = dynamic_cast<const MhBackend*>(&backend_->solver())) {
           const auto hyps = mh->hypotheses(n);

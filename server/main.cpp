@@ -1,6 +1,7 @@
 // loopd: the pose-graph SLAM back-end server (see server/server.h and lcmtypes/README.md).
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -26,7 +27,21 @@ int main(int argc, char** argv) {
     std::fputs(loopd::server::serverUsage().c_str(), stdout);
     return 0;
   }
-  spdlog::set_level(spdlog::level::from_str(cfg.logLevel));
+  // parseServerConfig accepted only logLevelNames(); spdlog's from_str would turn any other
+  // name into "off" without a word.
+  const std::vector<std::pair<const char*, spdlog::level::level_enum>> levels = {
+      {"trace", spdlog::level::trace}, {"debug", spdlog::level::debug},
+      {"info", spdlog::level::info},   {"warn", spdlog::level::warn},
+      {"error", spdlog::level::err},   {"critical", spdlog::level::critical},
+      {"off", spdlog::level::off}};
+  const auto level = std::find_if(levels.begin(), levels.end(),
+                                  [&](const auto& l) { return cfg.logLevel == l.first; });
+  if (level == levels.end()) {
+    std::fprintf(stderr, "loopd: --log-level: '%s' is not a log level\n\n%s", cfg.logLevel.c_str(),
+                 loopd::server::serverUsage().c_str());
+    return 2;
+  }
+  spdlog::set_level(level->second);
   struct sigaction sa {};
   sa.sa_handler = onSignal;
   sigemptyset(&sa.sa_mask);

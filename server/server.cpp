@@ -74,19 +74,25 @@ int runServer(const ServerConfig& cfg, const std::atomic<bool>& stop) {
             engine.replay(cfg.resume, /*rejournal=*/journal != nullptr, &validBytes);
         const auto c = engine.counters();
         spdlog::info(
-            "resumed {} events from {} in {:.2f} s: {} batches accepted, {} poses, chi2 {:.9g}", n,
-            cfg.resume,
+            "resumed {} events from {} in {:.2f} s: {} batches accepted, {} rejected, {} expired, "
+            "{} poses, chi2 {:.9g}",
+            n, cfg.resume,
             std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
-            c.accepted, engine.backend().estimate().size(),
+            c.accepted, c.rejected, c.expired, engine.backend().estimate().size(),
             engine.backend().graph().empty() ? 0.0 : engine.backend().chi2());
       } catch (const std::exception& e) {
-        spdlog::error("--resume {}: {}", cfg.resume, e.what());
+        // Not a journal (or damaged before its tail): refuse to start, the file untouched.
+        spdlog::error("--resume {}: {}; not starting", cfg.resume, e.what());
         return 1;
       }
     }
   }
   if (resumeIntoJournal) {
-    if (validBytes >= 0) truncateFile(cfg.journal, validBytes);
+    // Only a torn last event (kill -9 during a write) is cut; readJournal refused anything else.
+    if (validBytes >= 0 && !truncateFile(cfg.journal, validBytes)) {
+      spdlog::error("cannot cut the torn tail of journal {}", cfg.journal);
+      return 1;
+    }
     journal = std::make_unique<Journal>(cfg.journal, exists(cfg.journal));
     if (!journal->good()) {
       spdlog::error("cannot open journal {}", cfg.journal);

@@ -1,6 +1,11 @@
 #include "server/server_config.h"
 #include "lcmtypes/lcm_url.h"
 
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <map>
@@ -23,30 +28,43 @@ const char* const kKeys[] = {"lcm-url",  "solver",        "channel-prefix", "jou
                              "resume",   "publish-every", "log-level",      "hold-seconds",
                              "hold-max", "idle-seconds",  "max-hypotheses", "config"};
 
+// The ranges of the numeric flags (serverUsage() and README name them).
+constexpr int kMaxCount = 1000000;       // --publish-every, --hold-max
+constexpr double kMaxSeconds = 86400.0;  // --hold-seconds, --idle-seconds: a day
+constexpr int kMaxHypotheses = 1000;     // --max-hypotheses (as loopd-solve's)
+
 bool knownKey(const std::string& k) {
   for (const char* x : kKeys)
     if (k == x) return true;
   return false;
 }
 
-double toDouble(const std::string& k, const std::string& v) {
+// A finite number in [lo, hi], written whole (no NaN, inf or trailing characters).
+double toDouble(const std::string& k, const std::string& v, double lo, double hi) {
+  double d = std::nan("");
   try {
     size_t n = 0;
-    const double d = std::stod(v, &n);
-    if (n == v.size()) return d;
+    d = std::stod(v, &n);
+    if (n != v.size() || v.empty() || std::isspace(static_cast<unsigned char>(v.front())))
+      d = std::nan("");
   } catch (const std::exception&) {
   }
-  throw std::invalid_argument("--" + k + ": '" + v + "' is not a number");
+  if (!std::isfinite(d) || d < lo || d > hi) {
+    char range[64];
+    std::snprintf(range, sizeof range, "%g to %g", lo, hi);
+    throw std::invalid_argument("--" + k + ": '" + v + "' is not a number from " + range);
+  }
+  return d;
 }
 
-int toInt(const std::string& k, const std::string& v) {
-  try {
-    size_t n = 0;
-    const int i = std::stoi(v, &n);
-    if (n == v.size()) return i;
-  } catch (const std::exception&) {
-  }
-  throw std::invalid_argument("--" + k + ": '" + v + "' is not an integer");
+// A decimal integer in [lo, hi], written whole.
+int toInt(const std::string& k, const std::string& v, int lo, int hi) {
+  long long i = 0;
+  const auto r = std::from_chars(v.data(), v.data() + v.size(), i);
+  if (v.empty() || r.ec != std::errc() || r.ptr != v.data() + v.size() || i < lo || i > hi)
+    throw std::invalid_argument("--" + k + ": '" + v + "' is not an integer from " +
+                                std::to_string(lo) + " to " + std::to_string(hi));
+  return static_cast<int>(i);
 }
 
 void apply(ServerConfig& c, const std::string& k, const std::string& v) {
@@ -61,17 +79,23 @@ void apply(ServerConfig& c, const std::string& k, const std::string& v) {
   else if (k == "resume")
     c.resume = v;
   else if (k == "publish-every")
-    c.publishEvery = toInt(k, v);
-  else if (k == "log-level")
+    c.publishEvery = toInt(k, v, 0, kMaxCount);
+  else if (k == "log-level") {
+    const auto& names = logLevelNames();
+    if (std::find(names.begin(), names.end(), v) == names.end()) {
+      std::string list;
+      for (const auto& n : names) list += (list.empty() ? "" : "|") + n;
+      throw std::invalid_argument("--log-level: '" + v + "' is not one of " + list);
+    }
     c.logLevel = v;
-  else if (k == "hold-seconds")
-    c.holdSeconds = toDouble(k, v);
+  } else if (k == "hold-seconds")
+    c.holdSeconds = toDouble(k, v, 0, kMaxSeconds);
   else if (k == "hold-max")
-    c.holdMax = toInt(k, v);
+    c.holdMax = toInt(k, v, 0, kMaxCount);
   else if (k == "idle-seconds")
-    c.idleSeconds = toDouble(k, v);
+    c.idleSeconds = toDouble(k, v, 0, kMaxSeconds);
   else if (k == "max-hypotheses")
-    c.maxHypotheses = toInt(k, v);
+    c.maxHypotheses = toInt(k, v, 1, kMaxHypotheses);
 }
 
 void loadFile(ServerConfig& c, const std::string& path) {
@@ -96,6 +120,12 @@ void loadFile(ServerConfig& c, const std::string& path) {
 }
 
 }  // namespace
+
+const std::vector<std::string>& logLevelNames() {
+  static const std::vector<std::string> names = {"trace", "debug",    "info", "warn",
+                                                 "error", "critical", "off"};
+  return names;
+}
 
 std::string defaultSolver() { return isBackendName("isam2") ? "isam2" : "lm"; }
 
@@ -130,10 +160,6 @@ ServerConfig parseServerConfig(const std::vector<std::string>& args) {
     throw std::invalid_argument("--solver: unknown solver '" + c.solver + "'");
   if (c.channelPrefix.size() > 53)
     throw std::invalid_argument("--channel-prefix: at most 53 characters");
-  if (c.publishEvery < 0) throw std::invalid_argument("--publish-every must be >= 0");
-  if (c.maxHypotheses < 1) throw std::invalid_argument("--max-hypotheses must be >= 1");
-  if (c.holdMax < 0 || c.holdSeconds < 0 || c.idleSeconds < 0)
-    throw std::invalid_argument("--hold-max, --hold-seconds and --idle-seconds must be >= 0");
   return c;
 }
 
@@ -152,14 +178,15 @@ std::string serverUsage() {
          "  --journal FILE        append every accepted batch to this LCM log\n"
          "  --resume FILE         replay this journal at start-up (keeps appending if --journal is "
          "the same)\n"
-         "  --publish-every N     full estimate snapshot every N updates (default 50; 0 = only on "
-         "request)\n"
-         "  --hold-seconds S      how long a batch may wait for a pose not yet introduced (default "
-         "30)\n"
-         "  --hold-max N          at most N held batches (default 1000)\n"
-         "  --idle-seconds S      input pause before iterating to convergence (default 0.5)\n"
-         "  --max-hypotheses K    mh: live hypotheses kept at most (default 10)\n"
-         "  --log-level L         trace|debug|info|warn|error|off (default info)\n"
+         "  --publish-every N     full estimate snapshot every N updates, 0-1000000 (default 50; "
+         "0 = only on request)\n"
+         "  --hold-seconds S      how long a batch may wait for a pose not yet introduced, "
+         "0-86400 (default 30)\n"
+         "  --hold-max N          at most N held batches, 0-1000000 (default 1000)\n"
+         "  --idle-seconds S      input pause before iterating to convergence, 0-86400 (default "
+         "0.5)\n"
+         "  --max-hypotheses K    mh: live hypotheses kept at most, 1-1000 (default 10)\n"
+         "  --log-level L         trace|debug|info|warn|error|critical|off (default info)\n"
          "  --config FILE         `key = value` lines with the names above; flags override\n"
          "  --help                this text\n";
 }

@@ -13,7 +13,7 @@ struct ServerConfig {
   std::string journal;  // append every accepted batch here
   std::string resume;   // replay this journal at start-up
   int publishEvery = 50;
-  std::string logLevel = "info";
+  std::string logLevel = "info";  // one of logLevelNames()
   double holdSeconds = 30.0;
   int holdMax = 1000;
   double idleSeconds = 0.5;
@@ -21,9 +21,13 @@ struct ServerConfig {
   bool help = false;
 };
 
-/// Parses argv (and the --config file it names). Throws std::invalid_argument on bad input.
+/// Parses argv (and the --config file it names). Throws std::invalid_argument on bad input: an
+/// unknown flag or log level, a number that is not finite or outside its range (serverUsage()).
 ServerConfig parseServerConfig(const std::vector<std::string>& args);
 std::string serverUsage();
+/// The --log-level names: trace debug info warn error critical off (spdlog's, "warn" for
+/// "warning"); anything else is a usage error.
+const std::vector<std::string>& logLevelNames();
 /// The solver used when --solver is not given.
 std::string defaultSolver();
 /// Adds recv_buf_size to a udpm URL that lacks it (resolving "" to LCM's default first).

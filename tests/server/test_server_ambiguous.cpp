@@ -21,6 +21,7 @@
 #include "server/journal.h"
 #include "server/server_config.h"
 #include "solvers/io/dataset_reader.h"
+#include "tests/server/engine_harness.h"
 #include "tests/server/live_util.h"
 #include "tests/server/wire_encode.h"
 
@@ -62,15 +63,9 @@ A group(std::int64_t id, std::int8_t mode, std::vector<factor_t> alts, bool null
 
 factor_batch_t batch(const std::string& sender, std::int64_t seq, std::vector<factor_t> fs,
                      std::vector<A> amb = {}, std::vector<std::int64_t> remove = {}) {
-  factor_batch_t b{};
-  b.sender = sender;
-  b.sequence = seq;
-  b.factors = std::move(fs);
-  b.num_factors = static_cast<std::int16_t>(b.factors.size());
+  factor_batch_t b = test::batch(sender, seq, std::move(fs), std::move(remove));
   b.ambiguous = std::move(amb);
   b.num_ambiguous = static_cast<std::int16_t>(b.ambiguous.size());
-  b.remove_ids = std::move(remove);
-  b.num_remove_ids = static_cast<std::int16_t>(b.remove_ids.size());
   return b;
 }
 
