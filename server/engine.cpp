@@ -26,6 +26,11 @@ Engine::~Engine() = default;
 BackendOptions Engine::backendOptions() const {
   BackendOptions bo;
   bo.maxHypotheses = opt_.maxHypotheses;
+  // The server's values are the odometry's predictions and, after a SWITCH_SOLVER or a
+  // rebuild, the converged estimate: a batch solver's linear initialization would replace
+  // them with one that skips every closure with a per-factor robust request (and then
+  // rejects them all).
+  bo.linearInitialization = false;
   // Long optimize() work that can be given up (risam's GNC look at a pause) yields to input
   // and to a stop.
   bo.interrupt = [this] { return queueDepth() > 0 || (stop_ && stop_->load()); };

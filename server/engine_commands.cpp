@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <limits>
 #include <map>
+#include <unordered_set>
 
 #include "loopd/covariance_t.hpp"
 #include "loopd/error_t.hpp"
@@ -189,6 +190,19 @@ void Engine::commandError(const loopd::command_t& c, std::int8_t code, const std
 }
 
 void Engine::feedRebuilt(Backend& next, BackendUpdate all) {
+  // Only the graph's own variables: a solver's inner ones (the switch of a closure sent with
+  // robust "sc") are the new solver's to add, and given as values too they "already exist".
+  std::unordered_set<Key> used;
+  auto use = [&](const FactorPtr& f) {
+    for (int k = 0; k < f->size(); ++k) used.insert(f->key(k));
+  };
+  for (const auto& f : all.factors) use(f);
+  for (const auto& a : all.ambiguous)
+    for (const auto& f : a.alternatives) use(f);
+  Values initial;
+  for (int s = 0; s < all.initial.size(); ++s)
+    if (used.count(all.initial.key(s))) initial.insertFrom(all.initial, s);
+  all.initial = std::move(initial);
   feedWhole(next, std::move(all));
   // Callers swap `next` in only if this returns: a diverged rebuild leaves the old backend.
   if (ranAway(next.estimate()))

@@ -734,6 +734,38 @@ TEST(Engine, PerFactorRobustRequestsApplyUnderAnySolver) {
   EXPECT_GT(b.chi2(), robust.engine.backend().chi2());
 }
 
+// Per-factor requests on true closures survive every solver switch: "sc" (its switch is the
+// per-factor layer's own variable, which a rebuild gave the new solver twice: "already
+// exists") and "dcs" under a batch solver (its linear initialization skipped the wrapped
+// closures and replaced the converged estimate with the odometry's: every closure rejected).
+TEST(Engine, SwitchingSolversKeepsTrueClosuresWithPerFactorRequests) {
+  for (const char* robust : {"sc", "dcs"}) {
+    SCOPED_TRACE(robust);
+    EngineFixture f("isam2");
+    std::int64_t seq = 0, id = 0;
+    const Pose2 two{1 + std::cos(0.1), std::sin(0.1), 0.2};  // {1, 0, 0.1} twice
+    for (int i = 0; i < 20; ++i) {
+      std::vector<factor_t> fs = {between2(id++, 0, i, 0, i + 1, {1, 0.02, 0.1})};
+      if (i >= 1) {
+        fs.push_back(between2(id++, 0, i - 1, 0, i + 1, two, factor_t::ROLE_LOOP_CLOSURE));
+        fs.back().robust = robust;
+      }
+      f.send(batch("r0", ++seq, fs));
+    }
+    f.command(command_t::OPTIMIZE);
+    const double chi2 = f.engine.backend().chi2();
+    for (const char* solver : {"lm", "gn", "dogleg", "isam2", "mh", "lm"}) {
+      f.command(command_t::SWITCH_SOLVER, solver);
+      f.command(command_t::OPTIMIZE);
+      EXPECT_TRUE(f.out.errors.empty()) << solver << ": " << f.out.errors.front().reason;
+      f.out.errors.clear();
+      EXPECT_EQ(f.engine.backend().name(), solver);
+      EXPECT_TRUE(f.engine.backend().rejected().empty()) << solver;
+      EXPECT_NEAR(f.engine.backend().chi2(), chi2, 1e-6 * (1 + chi2)) << solver;
+    }
+  }
+}
+
 TEST(Engine, WholeGraphSchemesPerFactorOnlyAsTheSolver) {
   EngineFixture f("isam2");
   rigidWalkWithWrongClosure(f, "risam");
