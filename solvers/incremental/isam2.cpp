@@ -227,7 +227,8 @@ double Isam2Backend::costWithGauge() const {
 }
 
 bool Isam2Backend::fullSteps(int maxSteps, double relativeTolerance, double& previous,
-                             int& iterations) {
+                             int& iterations, bool* uphill) {
+  if (uphill) *uphill = false;
   for (int it = 0; it < maxSteps; ++it) {
     relinearizeAllAtEstimate();
     backSubstitute(nullptr);
@@ -239,6 +240,7 @@ bool Isam2Backend::fullSteps(int maxSteps, double relativeTolerance, double& pre
         std::memcpy(estimate_.data(v), theta_.data(v), sizeof(double) * kValueStride);
         std::fill_n(&delta_[static_cast<size_t>(v) * kMaxVarDim], kMaxVarDim, 0.0);
       }
+      if (uphill) *uphill = true;
       return false;
     }
     const double gain = previous - current;
@@ -261,10 +263,10 @@ void Isam2Backend::optimize() {
   summary_.initialChi2 = graph_.chi2(estimate_);
   double previous = costWithGauge();
   int iterations = 0;
-  bool converged = false, usedBatch = false;
+  bool converged = false, usedBatch = false, uphill = false;
   for (int round = 0; round < 2 && !converged; ++round) {
-    converged =
-        fullSteps(isam_.maxFinalIterations, isam_.finalRelativeTolerance, previous, iterations);
+    converged = fullSteps(isam_.maxFinalIterations, isam_.finalRelativeTolerance, previous,
+                          iterations, &uphill);
     if (converged || round == 1) break;
     // Gauss–Newton went uphill: Levenberg–Marquardt on the whole graph, then rebuild.
     usedBatch = true;
@@ -290,8 +292,10 @@ void Isam2Backend::optimize() {
   summary_.iterations = iterations;
   summary_.finalChi2 = graph_.chi2(estimate_);
   summary_.converged = converged;
-  summary_.stopReason =
-      converged ? (usedBatch ? "converged (after batch LM)" : "converged") : "iteration limit";
+  summary_.stopReason = converged ? (usedBatch ? "converged (after batch LM)" : "converged")
+                        : uphill  ? (usedBatch ? "Gauss-Newton step uphill (after batch LM)"
+                                               : "Gauss-Newton step uphill")
+                                  : "iteration limit";
 }
 
 }  // namespace loopd

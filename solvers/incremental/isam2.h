@@ -147,9 +147,10 @@ class Isam2Backend : public Backend {
   /// χ² of the graph and the internal gauge prior at the estimate.
   double costWithGauge() const;
   /// optimize()'s full steps from cost `previous` (updated): true when one gains less than
-  /// relativeTolerance of the cost; false when one goes uphill (reverted to θ) or maxSteps
-  /// ran out.
-  bool fullSteps(int maxSteps, double relativeTolerance, double& previous, int& iterations);
+  /// relativeTolerance of the cost; false when one goes uphill (reverted to θ; `uphill` set,
+  /// if given) or maxSteps ran out.
+  bool fullSteps(int maxSteps, double relativeTolerance, double& previous, int& iterations,
+                 bool* uphill = nullptr);
 
   // --- re-elimination of the top (isam2_recompute.cpp)
   /// Re-eliminates the top formed by affected_ (constrained_ ordered last).

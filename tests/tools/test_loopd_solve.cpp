@@ -173,6 +173,14 @@ TEST(LoopdSolve, AStopBeforeConvergenceIsAWarning) {
   // failed factorization and threw, exit 1).
   const RunResult dogleg = run(parts + " --solver dogleg --quiet");
   EXPECT_EQ(dogleg.exitCode, 0) << dogleg.output;
+  // isam2's optimize() says why it stopped (before: "iteration limit" after 13 of 30 steps,
+  // when a Gauss-Newton step had gone uphill after the batch fallback).
+  const std::string stats = testing::TempDir() + "/gm_uphill.json";
+  const RunResult gm = run(kData + "/intel.g2o --solver gm --incremental --quiet --stats " + stats);
+  EXPECT_EQ(gm.exitCode, 0) << gm.output;
+  EXPECT_NE(slurp(stats).find("\"stop_reason\": \"Gauss-Newton step uphill (after batch LM)\""),
+            std::string::npos)
+      << slurp(stats);
 }
 
 }  // namespace
