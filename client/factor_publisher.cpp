@@ -1,5 +1,6 @@
 #include "client/factor_publisher.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <lcm/lcm-cpp.hpp>
@@ -253,6 +254,18 @@ void FactorPublisher::addInitial(KeyRef k, std::int8_t type, std::vector<double>
 }
 
 void FactorPublisher::remove(std::int64_t id) {
+  // Added in the batch still pending: it is taken out of it instead (the server refuses a
+  // batch that removes what it adds: the id is not known to it yet).
+  auto& fs = batch_.factors;
+  auto& gs = batch_.ambiguous;
+  const auto f = std::find_if(fs.begin(), fs.end(), [&](const auto& x) { return x.id == id; });
+  const auto g = std::find_if(gs.begin(), gs.end(), [&](const auto& x) { return x.id == id; });
+  if (f != fs.end() || g != gs.end()) {
+    if (f != fs.end()) fs.erase(f);
+    if (g != gs.end()) gs.erase(g);
+    --items_;
+    return;
+  }
   batch_.remove_ids.push_back(id);
   added(1);
 }

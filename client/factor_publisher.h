@@ -83,7 +83,8 @@ class FactorPublisher {
   void initialValue(KeyRef pose, const Pose3& x);
   void initialValue(KeyRef point, const Eigen::Vector2d& p);
   void initialValue(KeyRef point, const Eigen::Vector3d& p);
-  /// Removes one of this sender's factors or ambiguous groups.
+  /// Removes one of this sender's factors or ambiguous groups; one added in the pending batch
+  /// is taken out of it instead.
   void remove(std::int64_t id);
 
   /// Publishes the pending batch (if any); returns its sequence, or 0 if nothing was pending.

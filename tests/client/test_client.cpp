@@ -59,6 +59,26 @@ TEST(FactorPublisher, SequencesIdsAndNoiseLayout) {
   EXPECT_EQ(cap.raw[2], cap.raw[1]);  // same bytes, same sequence
 }
 
+// Removing what the pending batch adds takes it out of the batch (before: the batch carried
+// both, and the server refused all of it, the odometry with it: UNKNOWN_FACTOR_ID).
+TEST(FactorPublisher, RemovingAFactorOfThePendingBatchTakesItOut) {
+  Capture cap;
+  client::FactorPublisher pub(cap.sink(), "a", "X_FACTORS");
+  const Eigen::Matrix3d info = Eigen::Matrix3d::Identity();
+  pub.odometry(0, 0, 1, Pose2{1, 0, 0}, info);
+  const std::int64_t closure =
+      pub.loopClosure(KeyRef::pose(0, 1), KeyRef::pose(0, 0), Pose2{-1, 0, 0}, info);
+  EXPECT_EQ(pub.pendingItems(), 2);
+  pub.remove(closure);
+  EXPECT_EQ(pub.pendingItems(), 1);
+  pub.remove(closure + 100);  // not pending: a removal for the server
+  EXPECT_EQ(pub.flush(), 1);
+  ASSERT_EQ(cap.batches.size(), 1u);
+  ASSERT_EQ(cap.batches[0].num_factors, 1);
+  EXPECT_EQ(cap.batches[0].factors[0].role, factor_t::ROLE_ODOMETRY);
+  EXPECT_EQ(cap.batches[0].remove_ids, std::vector<int64_t>{closure + 100});
+}
+
 TEST(FactorPublisher, FlushesAtMaxItems) {
   Capture cap;
   client::FactorPublisher pub(cap.sink(), "a", "X_FACTORS");
