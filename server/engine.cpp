@@ -19,6 +19,9 @@ Engine::Engine(EngineOptions options, Publisher& publisher, Journal* journal)
     : opt_(std::move(options)), pub_(publisher), journal_(journal) {
   backend_ = makeSolver(opt_.solver);
   lastInput_ = lastStatus_ = Clock::now();
+  // update_seq never goes back, across restarts and resumes too: it starts at the start time
+  // in µs (an update takes longer than one) and counts up from there.
+  updateSeq_ = nowUtime();
 }
 
 Engine::~Engine() = default;

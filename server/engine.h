@@ -234,7 +234,7 @@ class Engine : private GraphView {
   Values stagedValues_;
   std::deque<Held> holds_;
 
-  std::int64_t updateSeq_ = 0;
+  std::int64_t updateSeq_ = 0;  // from the start time in µs (Engine::Engine)
   std::int64_t updatesSinceSnapshot_ = 0;
   double lastUpdateMs_ = 0.0, sumUpdateMs_ = 0.0;
   bool dirty_ = false;                       // updated since the last optimize()

@@ -130,6 +130,9 @@ TEST(JournalResume, AResetIsJournaledAndReplayed) {
     EXPECT_EQ(resumed.engine.counters().duplicate, 1);
     resumed.send(batch("fe", 3, {between2(20, 5, 6, {1, 0, 0})}));
     EXPECT_EQ(resumed.status().poses, 7);
+    // update_seq never goes back (before: the resumed engine counted from 0 again, and
+    // EstimateSubscriber took its estimates for stale ones).
+    EXPECT_GT(r.update_seq, s.update_seq);
   }
   std::remove(path.c_str());
 }
