@@ -224,7 +224,7 @@ int run(const Args& a) {
       .integer("server_exit", serverExit);
   j.num("server_chi2", after.chi2)
       .integer("server_poses", after.poses)
-      .integer("server_updates", after.update_seq);
+      .integer("server_updates", after.update_seq - before.update_seq);
   j.str("label", a.get("label", ""));
 
   std::printf(
@@ -281,14 +281,15 @@ int run(const Args& a) {
         .num("server_poses_per_s_converged", rateConv)
         .num("server_converged_chi2", converged ? conv.chi2 : std::nan(""))
         .num("server_mean_update_ms", after.mean_update_ms)
-        .integer("server_update_rounds", after.update_seq);
+        .integer("server_update_rounds", after.update_seq - before.update_seq);
     std::printf(
         "server: published in %.2f s; last pose in an estimate after %.2f s (%.0f poses/s); "
         "converged "
         "estimate after %.2f s net of the %.2f s idle wait (%.0f poses/s), chi2 %.6g, %lld update "
         "rounds\n",
         secondsSince(t0, tLastSent), applyS, rateApplied, convS, idleSeconds, rateConv,
-        converged ? conv.chi2 : std::nan(""), static_cast<long long>(after.update_seq));
+        converged ? conv.chi2 : std::nan(""),
+        static_cast<long long>(after.update_seq - before.update_seq));
     if (!a.has("no-offline")) {
       if (poses >= 0)
         std::fprintf(stderr, "note: --poses given; the offline run solves the whole file\n");
