@@ -104,28 +104,6 @@ class SnapshotIds {
   std::map<std::pair<bool, std::uint32_t>, std::uint64_t> first_;
 };
 
-// Ω of a pose–landmark factor, which keeps only √Ω: at an identity pose ∂e/∂p = √Ω.
-template <int N>
-Eigen::Matrix<double, N, N> landmarkInformation(const Factor& f) {
-  Values v;
-  const Key pose = makeKey(0, KeyKind::Pose, 0), point = makeKey(0, KeyKind::Landmark, 0);
-  if (N == 2) {
-    v.insert(pose, SE2());
-    v.insertPoint2(point, Vec2(1, 0));
-  } else {
-    v.insert(pose, SE3());
-    v.insertPoint3(point, Vec3(1, 0, 0));
-  }
-  const double* x[2] = {v.data(0), v.data(1)};
-  JacobianBlock jp{};
-  double* J[2] = {nullptr, jp.data()};
-  double r[kMaxResidualDim];
-  f.evaluate(x, r, J);
-  const Eigen::Map<const Eigen::Matrix<double, N, N>> sqrtInfo(jp.data());
-  const Eigen::Matrix<double, N, N> info = sqrtInfo.transpose() * sqrtInfo;
-  return 0.5 * (info + info.transpose());
-}
-
 // A factor as a g2o edge between snapshot ids (measurements are relative, so they hold in any
 // frame: an anchored inter-robot factor is the between of its two common-frame poses). False
 // for what g2o cannot express: priors, bearing-range.
@@ -161,13 +139,13 @@ bool toG2oEdge(const Factor& f, const SnapshotIds& id, io::Edge& e) {
     e.to = id(f.key(1));
     e.measurement[0] = p->measured().x();
     e.measurement[1] = p->measured().y();
-    e.information.topLeftCorner<2, 2>() = landmarkInformation<2>(f);
+    e.information.topLeftCorner<2, 2>() = p->information();
   } else if (const auto* p = dynamic_cast<const PosePointFactor3*>(&f)) {
     e.type = io::EdgeType::PosePoint3;
     e.from = id(f.key(0));
     e.to = id(f.key(1));
     for (int i = 0; i < 3; ++i) e.measurement[static_cast<size_t>(i)] = p->measured()[i];
-    e.information.topLeftCorner<3, 3>() = landmarkInformation<3>(f);
+    e.information.topLeftCorner<3, 3>() = p->information();
   } else {
     return false;
   }

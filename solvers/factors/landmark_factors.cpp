@@ -8,6 +8,7 @@ PosePointFactor2::PosePointFactor2(Key pose, Key point, const Vec2& measured,
                                    const Eigen::Matrix2d& information, FactorRole role)
     : Factor({{pose, VarType::SE2}, {point, VarType::Point2}}, 2, role),
       measured_(measured),
+      information_(information),
       sqrtInfo_(sqrtInformation<2>(information)) {}
 
 void PosePointFactor2::evaluate(const double* const* x, double* r, double* const* J) const {
@@ -30,6 +31,7 @@ PosePointFactor3::PosePointFactor3(Key pose, Key point, const Vec3& measured,
                                    const Mat3& information, FactorRole role)
     : Factor({{pose, VarType::SE3}, {point, VarType::Point3}}, 3, role),
       measured_(measured),
+      information_(information),
       sqrtInfo_(sqrtInformation<3>(information)) {}
 
 void PosePointFactor3::evaluate(const double* const* x, double* r, double* const* J) const {

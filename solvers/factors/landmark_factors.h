@@ -16,9 +16,11 @@ class PosePointFactor2 final : public Factor {
   std::unique_ptr<Factor> clone() const override;
   const char* typeName() const override { return "PosePoint2"; }
   const Vec2& measured() const { return measured_; }
+  const Eigen::Matrix2d& information() const { return information_; }
 
  private:
   Vec2 measured_;
+  Eigen::Matrix2d information_;
   Eigen::Matrix2d sqrtInfo_;
 };
 
@@ -30,9 +32,11 @@ class PosePointFactor3 final : public Factor {
   std::unique_ptr<Factor> clone() const override;
   const char* typeName() const override { return "PosePoint3"; }
   const Vec3& measured() const { return measured_; }
+  const Mat3& information() const { return information_; }
 
  private:
   Vec3 measured_;
+  Mat3 information_;
   Mat3 sqrtInfo_;
 };
 
