@@ -4,8 +4,6 @@
 // is refused.
 #include <spdlog/spdlog.h>
 
-#include <unordered_set>
-
 #include "server/engine.h"
 #include "solvers/problem/initial_guess.h"
 
@@ -62,26 +60,15 @@ bool Engine::recoverIfDiverged(const char* what, const Values* lastGood) {
 void Engine::recoverFromDivergence(const Values* lastGood) {
   const Values& x = backend_->estimate();
   BackendUpdate all;
-  std::unordered_set<Key> used;
-  auto use = [&](const FactorPtr& f) {
-    for (int k = 0; k < f->size(); ++k) used.insert(f->key(k));
-  };
-  for (const auto& [id, f] : live_) {
-    all.factors.push_back(f);
-    use(f);
-  }
-  for (const auto& [id, g] : groups_) {
-    all.ambiguous.push_back(g.factor);
-    for (const auto& f : g.factor.alternatives) use(f);
-  }
+  for (const auto& [id, f] : live_) all.factors.push_back(f);
+  for (const auto& [id, g] : groups_) all.ambiguous.push_back(g.factor);
   // Start from the last good estimate where there is one, else from the sane part of the
-  // diverged one; the rest is composed along the odometry from its neighbours.
+  // diverged one; the rest is composed along the odometry from its neighbours. (feedRebuilt
+  // keeps only the graph's own variables of these.)
   for (int s = 0; lastGood && s < lastGood->size(); ++s)
-    if (used.count(lastGood->key(s)) && lastGood->slotWithin(s, kRunawayMagnitude))
-      all.initial.insertFrom(*lastGood, s);
+    if (lastGood->slotWithin(s, kRunawayMagnitude)) all.initial.insertFrom(*lastGood, s);
   for (int s = 0; s < x.size(); ++s)
-    if (used.count(x.key(s)) && !all.initial.contains(x.key(s)) &&
-        x.slotWithin(s, kRunawayMagnitude))
+    if (!all.initial.contains(x.key(s)) && x.slotWithin(s, kRunawayMagnitude))
       all.initial.insertFrom(x, s);
   std::vector<FactorPtr> everything = all.factors;
   for (const auto& a : all.ambiguous)
