@@ -10,6 +10,8 @@
 #include <sstream>
 #include <string>
 
+#include "tools/loopd-eval/trajectory_metrics.h"
+
 namespace {
 
 const std::string kSolve = std::string(LOOPD_BINARY_DIR) + "/tools/loopd-solve";
@@ -138,11 +140,6 @@ TEST(LoopdSolve, NeverWritesANonFiniteEstimate) {
   }
 }
 
-double jsonNumber(const std::string& json, const std::string& field) {
-  const size_t at = json.find("\"" + field + "\": ");
-  return at == std::string::npos ? NAN : std::atof(json.c_str() + at + field.size() + 4);
-}
-
 // Without --incremental the whole file is one update; an incremental variant's update() takes
 // only the steps an online update takes, so it is then iterated to convergence (before: isam2
 // stopped at intel chi2 45.73 against the optimum's 45.00, exit 0).
@@ -152,8 +149,8 @@ TEST(LoopdSolve, IncrementalVariantsAtOnceSolveToConvergence) {
   ASSERT_EQ(run(kData + "/intel.g2o --quiet --stats " + lm).exitCode, 0);
   const RunResult r = run(kData + "/intel.g2o --solver isam2 --quiet --stats " + isam2);
   ASSERT_EQ(r.exitCode, 0) << r.output;
-  const double optimum = jsonNumber(slurp(lm), "final_chi2");
-  EXPECT_NEAR(jsonNumber(slurp(isam2), "final_chi2"), optimum, 1e-6 * optimum);
+  const double optimum = loopd::tools::jsonNumber(slurp(lm), "final_chi2", NAN);
+  EXPECT_NEAR(loopd::tools::jsonNumber(slurp(isam2), "final_chi2", NAN), optimum, 1e-6 * optimum);
   EXPECT_NE(slurp(isam2).find("\"converged\": true"), std::string::npos) << slurp(isam2);
 }
 
