@@ -100,8 +100,9 @@ class Engine : private GraphView {
   void setJournal(Journal* journal) { journal_ = journal; }
   EngineCounters counters() const;
   std::int64_t updateSeq() const { return updateSeq_; }
-  /// Common-frame pose of a robot's pose (A ⊕ x), for tests.
-  bool commonFramePose(Key pose, std::vector<double>& out) const;
+  /// A robot's pose (A ⊕ x) or landmark (A·p) in the common frame (its own while the robot is
+  /// not joined), as published: x y θ, x y z qx qy qz qw, x y or x y z. False for anything else.
+  bool commonFramePose(Key poseOrLandmark, std::vector<double>& out) const;
   bool robotJoined(std::uint32_t robot) const;
 
  private:
@@ -192,6 +193,9 @@ class Engine : private GraphView {
   std::vector<loopd::loop_decision_t> decisionList(bool full);
   Eigen::MatrixXd commonFrameCovariance(const std::vector<Key>& keys);
   void rebuildBackend(const std::string& solver);
+  /// SAVE_SNAPSHOT (engine_snapshot.cpp): the graph and estimate as g2o at path. Throws
+  /// std::exception saying why it could not be written.
+  void writeSnapshot(const std::string& path) const;
   /// If `what` (an update, an idle optimize) left the backend's estimate ranAway(): logs it
   /// and puts in a new backend from the committed graph, started at lastGood (if given) and
   /// the sane rest, and returns true (engine_divergence.cpp). If that rebuild diverges too,

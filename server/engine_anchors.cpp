@@ -147,6 +147,12 @@ bool Engine::commonFramePose(Key k, std::vector<double>& out) const {
     const SE3 x = anchored ? se3Of(est, anchorKey(r)) * est.se3(s) : est.se3(s);
     out.assign(7, 0.0);
     x.toTranslationQuaternion(out.data());
+  } else if (est.type(s) == VarType::Point2) {
+    const Vec2 p = anchored ? se2Of(est, anchorKey(r)).transform(est.point2(s)) : est.point2(s);
+    out = {p.x(), p.y()};
+  } else if (est.type(s) == VarType::Point3) {
+    const Vec3 p = anchored ? se3Of(est, anchorKey(r)).transform(est.point3(s)) : est.point3(s);
+    out = {p.x(), p.y(), p.z()};
   } else {
     return false;
   }

@@ -6,21 +6,16 @@
 
 #include <algorithm>
 #include <charconv>
-#include <cstdio>
 #include <limits>
-#include <map>
 #include <unordered_set>
 
 #include "loopd/covariance_t.hpp"
 #include "loopd/error_t.hpp"
 #include "robust/backend_registry.h"
 #include "robust/mh_backend.h"
-#include "server/anchored_between_factor.h"
 #include "server/fingerprint.h"
 #include "server/wire.h"
 #include "server/wire_factors.h"
-#include "solvers/factors/landmark_factors.h"
-#include "solvers/io/estimate_writer.h"
 
 namespace loopd::server {
 
@@ -62,100 +57,6 @@ bool parseDecimal(const std::string& s, std::int64_t max, std::int64_t& out) {
   if (r.ec != std::errc() || r.ptr != s.data() + s.size() || v > max) return false;
   out = v;
   return true;
-}
-
-// --- SAVE_SNAPSHOT ------------------------------------------------------------------------
-// g2o has one id space: each robot's poses, then each robot's landmarks, get a block of ids
-// (robots in ascending order), the variable's index added to the block's first id. One
-// robot without landmarks keeps its pose indices as ids.
-class SnapshotIds {
- public:
-  explicit SnapshotIds(const Values& est) {
-    std::map<std::pair<bool, std::uint32_t>, std::uint64_t> top;  // (landmark?, robot) → max
-    for (Key k : est.keys()) {
-      if (keyKind(k) != KeyKind::Pose && keyKind(k) != KeyKind::Landmark) continue;
-      auto& m = top[{keyKind(k) == KeyKind::Landmark, keyRobot(k)}];
-      m = std::max(m, keyIndex(k));
-    }
-    std::uint64_t next = 0;
-    for (const auto& [block, maxIndex] : top) {
-      if (next > kMaxKeyIndex || maxIndex > kMaxKeyIndex - next)
-        throw std::runtime_error(
-            "the snapshot's ids would exceed " + std::to_string(kMaxKeyIndex) +
-            " (what g2o readers keep); indices are too large to give each robot a block");
-      first_[block] = next;
-      next += maxIndex + 1;
-    }
-  }
-  std::int64_t operator()(Key k) const {
-    return static_cast<std::int64_t>(first_.at({keyKind(k) == KeyKind::Landmark, keyRobot(k)}) +
-                                     keyIndex(k));
-  }
-  // "# robot 1 poses: id = 6 + index" per block, for the end of the file.
-  std::string legend() const {
-    std::string out;
-    for (const auto& [block, first] : first_)
-      out += "# robot " + std::to_string(block.second) + (block.first ? " landmarks" : " poses") +
-             ": id = " + std::to_string(first) + " + index\n";
-    return out;
-  }
-
- private:
-  std::map<std::pair<bool, std::uint32_t>, std::uint64_t> first_;
-};
-
-// A factor as a g2o edge between snapshot ids (measurements are relative, so they hold in any
-// frame: an anchored inter-robot factor is the between of its two common-frame poses). False
-// for what g2o cannot express: priors, bearing-range.
-bool toG2oEdge(const Factor& f, const SnapshotIds& id, io::Edge& e) {
-  e = io::Edge();
-  auto se2 = [&](Key a, Key b, const SE2& z, const Eigen::Matrix3d& info) {
-    e.type = io::EdgeType::BetweenSE2;
-    e.from = id(a);
-    e.to = id(b);
-    e.measurement[0] = z.x;
-    e.measurement[1] = z.y;
-    e.measurement[2] = z.theta;
-    e.information.topLeftCorner<3, 3>() = info;
-  };
-  auto se3 = [&](Key a, Key b, const SE3& z, const Mat6& info) {
-    e.type = io::EdgeType::BetweenSE3;
-    e.from = id(a);
-    e.to = id(b);
-    z.toTranslationQuaternion(e.measurement.data());
-    e.information = info;
-  };
-  if (const auto* b = dynamic_cast<const BetweenFactorSE2*>(&f)) {
-    se2(f.key(0), f.key(1), b->measured(), b->information());
-  } else if (const auto* b = dynamic_cast<const BetweenFactorSE3*>(&f)) {
-    se3(f.key(0), f.key(1), b->measured(), b->information());
-  } else if (const auto* a = dynamic_cast<const AnchoredBetweenFactorSE2*>(&f)) {
-    se2(f.key(1), f.key(3), a->measured(), a->information());
-  } else if (const auto* a = dynamic_cast<const AnchoredBetweenFactorSE3*>(&f)) {
-    se3(f.key(1), f.key(3), a->measured(), a->information());
-  } else if (const auto* p = dynamic_cast<const PosePointFactor2*>(&f)) {
-    e.type = io::EdgeType::PosePoint2;
-    e.from = id(f.key(0));
-    e.to = id(f.key(1));
-    e.measurement[0] = p->measured().x();
-    e.measurement[1] = p->measured().y();
-    e.information.topLeftCorner<2, 2>() = p->information();
-  } else if (const auto* p = dynamic_cast<const PosePointFactor3*>(&f)) {
-    e.type = io::EdgeType::PosePoint3;
-    e.from = id(f.key(0));
-    e.to = id(f.key(1));
-    for (int i = 0; i < 3; ++i) e.measurement[static_cast<size_t>(i)] = p->measured()[i];
-    e.information.topLeftCorner<3, 3>() = p->information();
-  } else {
-    return false;
-  }
-  return true;
-}
-
-void appendText(const std::string& path, const std::string& text) {
-  std::FILE* f = std::fopen(path.c_str(), "ab");
-  const bool ok = f && std::fwrite(text.data(), 1, text.size(), f) == text.size();
-  if ((f && std::fclose(f) != 0) || !ok) throw std::runtime_error("cannot append to " + path);
 }
 
 }  // namespace
@@ -390,116 +291,17 @@ void Engine::handleCommand(const Inbound& m) {
         return;
       }
       case C::SAVE_SNAPSHOT: {
-        // The graph and estimate as g2o (README, Snapshots): vertices in the frame the
-        // estimates are published in, ids from SnapshotIds, the factors g2o can express as
-        // edges and the ambiguous groups as HYPOTHESES; priors and bearing-range are left out.
         if (c.argument.empty()) {
           commandError(c, E::COMMAND_FAILED, "argument must be a path", m.channel);
           return;
         }
-        const Values& est = backend_->estimate();
-        std::unique_ptr<SnapshotIds> ids;
         try {
-          ids = std::make_unique<SnapshotIds>(est);
+          writeSnapshot(c.argument);
         } catch (const std::exception& e) {
           commandError(c, E::COMMAND_FAILED, std::string("cannot write snapshot: ") + e.what(),
                        m.channel);
           return;
         }
-        io::Dataset ds;
-        ds.path = c.argument;
-        std::vector<Key> keys = est.keys();
-        std::sort(keys.begin(), keys.end());
-        for (Key k : keys) {
-          const int s = est.slot(k);
-          io::Vertex v;
-          std::vector<double> common;
-          if (keyKind(k) == KeyKind::Pose) {
-            if (!commonFramePose(k, common)) continue;
-            v.id = (*ids)(k);
-            v.type = est.type(s) == VarType::SE3 ? io::VertexType::SE3 : io::VertexType::SE2;
-            std::copy(common.begin(), common.end(), v.value.begin());
-            ds.is3d |= v.type == io::VertexType::SE3;
-            ds.poses.push_back(v);
-          } else if (keyKind(k) == KeyKind::Landmark) {
-            // Through its namespace robot's anchor, as publishEstimates does.
-            const std::uint32_t r = keyRobot(k);
-            const bool anchored = robotJoined(r) && est.contains(anchorKey(r));
-            v.id = (*ids)(k);
-            if (est.type(s) == VarType::Point3) {
-              v.type = io::VertexType::Point3;
-              const Vec3 p =
-                  anchored ? se3Of(est, anchorKey(r)).transform(est.point3(s)) : est.point3(s);
-              for (int i = 0; i < 3; ++i) v.value[static_cast<size_t>(i)] = p[i];
-            } else {
-              v.type = io::VertexType::Point2;
-              const Vec2 p =
-                  anchored ? se2Of(est, anchorKey(r)).transform(est.point2(s)) : est.point2(s);
-              v.value[0] = p.x();
-              v.value[1] = p.y();
-            }
-            ds.landmarks.push_back(v);
-          }
-        }
-        std::map<std::string, int> skipped;  // the senders' factors g2o cannot express
-        int gauge = 0;                       // the server's own priors (first poses, anchors)
-        for (const auto& [fid, f] : live_) {
-          io::Edge e;
-          if (toG2oEdge(*f, *ids, e)) {
-            e.index = static_cast<int>(ds.edges.size());
-            ds.edges.push_back(e);
-          } else if (owners_.count(fid)) {
-            ++skipped[f->typeName()];
-          } else {
-            ++gauge;
-          }
-        }
-        int skippedGroups = 0;
-        for (const auto& [gid, g] : groups_) {
-          std::vector<io::Edge> alts;
-          for (const auto& a : g.factor.alternatives) {
-            io::Edge e;
-            if (!toG2oEdge(*a, *ids, e)) break;
-            alts.push_back(e);
-          }
-          if (alts.size() != g.factor.alternatives.size()) {
-            ++skippedGroups;
-            continue;
-          }
-          io::HypothesisGroup h;
-          h.firstEdge = static_cast<int>(ds.edges.size());
-          h.count = static_cast<int>(alts.size());
-          h.null = g.factor.nullHypothesis;
-          ds.hypotheses.push_back(h);
-          for (auto& e : alts) {
-            e.index = static_cast<int>(ds.edges.size());
-            ds.edges.push_back(e);
-          }
-        }
-        std::string notes;
-        for (const auto& [type, n] : skipped)
-          notes += (notes.empty() ? "" : ", ") + std::to_string(n) + " " + type;
-        if (skippedGroups > 0)
-          notes += (notes.empty() ? "" : ", ") + std::to_string(skippedGroups) +
-                   " ambiguous groups with bearing-range alternatives";
-        try {
-          io::writeG2oGraph(c.argument, ds);
-          appendText(c.argument,
-                     "# loopd snapshot: " + std::to_string(ds.poses.size()) + " poses, " +
-                         std::to_string(ds.landmarks.size()) + " landmarks, " +
-                         std::to_string(ds.edges.size()) + " edges (update " +
-                         std::to_string(updateSeq_) + ")\n" + ids->legend() +
-                         (notes.empty() ? "" : "# not written (no g2o form): " + notes + "\n"));
-        } catch (const std::exception& e) {
-          commandError(c, E::COMMAND_FAILED, std::string("cannot write snapshot: ") + e.what(),
-                       m.channel);
-          return;
-        }
-        if (!notes.empty())
-          spdlog::warn("snapshot {}: not written (g2o has no form for them): {}", c.argument,
-                       notes);
-        spdlog::info("snapshot {}: {} poses, {} landmarks, {} edges ({} gauge priors left out)",
-                     c.argument, ds.poses.size(), ds.landmarks.size(), ds.edges.size(), gauge);
         publishStatus(c.request_id, false);
         return;
       }
