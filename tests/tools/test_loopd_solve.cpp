@@ -10,7 +10,7 @@
 #include <sstream>
 #include <string>
 
-#include "tools/loopd-eval/trajectory_metrics.h"
+#include "tools/loopd-eval/json_input.h"
 
 namespace {
 

@@ -17,6 +17,7 @@
 
 #include "solvers/io/dataset_reader.h"
 #include "solvers/io/estimate_writer.h"
+#include "tools/loopd-eval/json_input.h"
 #include "tools/loopd-eval/trajectory_metrics.h"
 #include "tools/loopd-outliers/ambiguous_generator.h"
 #include "tools/loopd-outliers/outlier_generator.h"

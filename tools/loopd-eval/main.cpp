@@ -10,6 +10,7 @@
 #include "solvers/io/dataset_reader.h"
 #include "tools/common/cli.h"
 #include "tools/common/json_writer.h"
+#include "tools/loopd-eval/json_input.h"
 #include "tools/loopd-eval/trajectory_metrics.h"
 
 using namespace loopd;
