@@ -40,6 +40,13 @@ factor_t between2(std::int64_t id, std::int64_t a, std::int64_t b, Pose2 z,
 }
 
 using test::batch;
+
+// Odometry 0 → 1 → … → n, 1 m steps, factor i from pose i.
+std::vector<factor_t> straightOdometry(int n) {
+  std::vector<factor_t> fs;
+  for (int i = 0; i < n; ++i) fs.push_back(between2(i, i, i + 1, {1, 0, 0}));
+  return fs;
+}
 using test::encode;
 
 std::string tmpPath(const std::string& name) {
@@ -103,9 +110,7 @@ TEST(JournalResume, AResetIsJournaledAndReplayed) {
   {
     Journal j(path, false);
     Fixture live("lm", &j);
-    std::vector<factor_t> a;
-    for (int i = 0; i < 5; ++i) a.push_back(between2(i, i, i + 1, {1, 0, 0}));
-    live.send(batch("fe", 1, a));
+    live.send(batch("fe", 1, straightOdometry(5)));
     live.command(command_t::RESET, 5);
     std::vector<factor_t> b1, b2;
     for (int i = 0; i < 3; ++i) b1.push_back(between2(i, i, i + 1, {0, 0, M_PI / 2}));
@@ -173,9 +178,7 @@ TEST(JournalResume, AResetIsCarriedIntoANewJournal) {
 // number of batches sent: loopd-listen --until-batches ends).
 TEST(JournalResume, ABatchTheSolverRefusesIsCountedAsRejected) {
   Fixture f("isam2");
-  std::vector<factor_t> a;
-  for (int i = 0; i < 5; ++i) a.push_back(between2(i, i, i + 1, {1, 0, 0}));
-  f.send(batch("a", 1, a));
+  f.send(batch("a", 1, straightOdometry(5)));
   f.send(batch("a", 2, {between2(5, 5, 6, {1e200, 0, 0})}));
   ASSERT_FALSE(f.out.errors.empty());
   EXPECT_EQ(f.out.errors.back().code, loopd::error_t::INTERNAL);
@@ -196,9 +199,7 @@ TEST(JournalResume, ABatchTheSolverRefusedIsNotReplayed) {
   {
     Journal j(path, false);
     Fixture live("isam2", &j);
-    std::vector<factor_t> a;
-    for (int i = 0; i < 5; ++i) a.push_back(between2(i, i, i + 1, {1, 0, 0}));
-    live.send(batch("a", 1, a));
+    live.send(batch("a", 1, straightOdometry(5)));
     live.send(batch("a", 2, {between2(5, 5, 6, {1e200, 0, 0})}));
     live.send(batch("a", 3, {between2(6, 5, 6, {1, 0, 0})}));
     EXPECT_EQ(j.written(), 2);
