@@ -106,6 +106,9 @@ class Isam2Backend : public Backend {
     std::vector<int> offsets;  // local scalar offset of vars[i]; size vars.size() + 1
     SharedBuffer marginal;     // n×n joint covariance of vars (cached per epoch)
     long marginalEpoch = -1;
+    // Its frontal block was singular and damped to factor (a part of the graph nothing ties
+    // to the rest): the Bayes tree's covariances on and below it are arbitrary.
+    bool damped = false;
     long topStamp = -1;
     long pathStamp = -1;
     bool alive = false;

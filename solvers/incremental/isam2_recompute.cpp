@@ -392,6 +392,7 @@ void Isam2Backend::eliminateCliques(const Top& top) {
           d += lambda * (1.0 + std::abs(d));
         }
       }
+      C.damped = attempt > 0;
       if (factorizeClique(C) || attempt >= 6) break;
     }
     for (int v : C.vars) localIdx_[v] = -1;

@@ -34,6 +34,16 @@ int edgeDimension(EdgeType t) {
 
 int edgeMeasurementSize(EdgeType t) { return t == EdgeType::BetweenSE3 ? 7 : edgeDimension(t); }
 
+Edge equivalenceEdge(std::int64_t a, std::int64_t b, int index) {
+  Edge e;
+  e.type = EdgeType::BetweenSE2;
+  e.from = a;
+  e.to = b;
+  e.information.topLeftCorner<3, 3>() = Eigen::Matrix3d::Identity() * kEquivalenceInformation;
+  e.index = index;
+  return e;
+}
+
 namespace {
 
 std::string formatError(const std::string& file, int line, const std::string& reason) {

@@ -76,6 +76,10 @@ struct Dataset {
   std::vector<HypothesisGroup> hypotheses;
 };
 
+/// An EQUIV pair as the edge it is solved as: the identity between a and b, information
+/// kEquivalenceInformation·I, numbered `index` among the edges.
+Edge equivalenceEdge(std::int64_t a, std::int64_t b, int index);
+
 /// Every reader failure: names the file, the 1-based line (0 if not line-specific), and why.
 class DatasetError : public std::runtime_error {
  public:

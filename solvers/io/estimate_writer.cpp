@@ -137,14 +137,7 @@ void writeG2oGraph(const std::string& path, const Dataset& graph) {
   }
   // TORO's EQUIV pairs, after every edge (the edges keep their indices), as the identity
   // constraints they are solved as: g2o has no EQUIV.
-  for (const auto& [a, b] : graph.equivalences) {
-    Edge e;
-    e.type = EdgeType::BetweenSE2;
-    e.from = a;
-    e.to = b;
-    e.information.topLeftCorner<3, 3>() = Eigen::Matrix3d::Identity() * kEquivalenceInformation;
-    out.edge(e);
-  }
+  for (const auto& [a, b] : graph.equivalences) out.edge(equivalenceEdge(a, b, 0));
   save(path, out.text());
 }
 

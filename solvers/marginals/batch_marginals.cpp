@@ -2,6 +2,8 @@
 
 #include <stdexcept>
 
+#include "solvers/marginals/singular_information.h"
+
 namespace loopd {
 
 namespace {
@@ -28,10 +30,7 @@ KeyColumns locate(const NonlinearOptimizer& opt, const Values& values,
 }
 
 void factorOrThrow(NonlinearOptimizer& opt, const Values& values, const double* weights) {
-  if (!opt.factorizeAt(values, weights))
-    throw std::runtime_error(
-        "marginals: the information matrix is singular at the estimate (a part of the graph "
-        "not tied to the first pose, or a variable no factor fully constrains)");
+  if (!opt.factorizeAt(values, weights)) throw std::runtime_error(kSingularInformationMessage);
 }
 
 // Solves H·X = E for the unit columns of keys [first, last) and returns X (n × cols).

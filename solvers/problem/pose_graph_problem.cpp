@@ -111,11 +111,11 @@ PoseGraphProblem buildProblem(const io::Dataset& ds) {
     }
     p.ambiguous.push_back(std::move(group));
   }
-  // TORO EQUIV: the two poses are one place.
+  // TORO EQUIV: the two poses are one place. The file states it rather than measures it, so it
+  // is trusted as odometry is: a robust variant never weighs it.
   for (const auto& [a, b] : ds.equivalences) {
-    auto f = std::make_shared<BetweenFactorSE2>(
-        poseKey(static_cast<std::uint64_t>(a)), poseKey(static_cast<std::uint64_t>(b)), SE2(),
-        Eigen::Matrix3d::Identity() * io::kEquivalenceInformation, FactorRole::LoopClosure);
+    auto f = std::const_pointer_cast<Factor>(
+        makeFactor(io::equivalenceEdge(a, b, p.graph.size()), /*odometry=*/true));
     f->setId(static_cast<FactorId>(p.graph.size()));
     p.graph.add(std::move(f));
   }

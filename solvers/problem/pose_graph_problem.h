@@ -33,8 +33,8 @@ struct PoseGraphProblem {
 /// Builds factors and initial values. Between edges whose ends are next to each other in the
 /// file's pose ids (neighboursInIdOrder) are odometry, others (and every alternative of a
 /// HYPOTHESES group) loop closures; pose–landmark edges are landmark sightings. EQUIV pairs become
-/// tight between constraints (identity, information 1e6). Throws std::invalid_argument (naming the
-/// file line) for an edge the factors reject.
+/// tight between constraints (io::equivalenceEdge), trusted as odometry is. Throws
+/// std::invalid_argument (naming the file line) for an edge the factors reject.
 PoseGraphProblem buildProblem(const io::Dataset& dataset);
 
 /// Whether poses a and b are next to each other in sortedPoseIds (every pose id, ascending):

@@ -477,6 +477,30 @@ TEST(Isam2, VictoriaParkCovariancesAreSymmetricPositiveDefinite) {
   EXPECT_GT(Eigen::SelfAdjointEigenSolver<MatrixXd>(J).eigenvalues().minCoeff(), 0.0);
 }
 
+// Two parts nothing ties together: the second's information is singular, so its covariances
+// are refused, as the batch marginals refuse them (before: the damping's arbitrary numbers).
+// The first part, tied to the gauge prior, keeps its exact covariances.
+TEST(Isam2, RefusesTheCovariancesOfAPartNotTiedToTheFirstPose) {
+  const Mat3 info = Mat3::Identity();
+  BackendUpdate u;
+  for (int i = 0; i < 4; ++i) u.initial.insert(poseKey(i), SE2(i, i > 1 ? 5.0 : 0.0, 0.0));
+  for (int from : {0, 2}) {
+    auto f = std::make_shared<BetweenFactorSE2>(poseKey(from), poseKey(from + 1),
+                                                SE2(1.0, 0.0, 0.0), info);
+    f->setId(static_cast<FactorId>(from));
+    u.factors.push_back(f);
+  }
+  Isam2Backend isam;
+  isam.update(u);
+  EXPECT_THROW(isam.marginals({poseKey(3)}), std::runtime_error);
+  EXPECT_THROW(isam.marginalCovariance({poseKey(2), poseKey(3)}), std::runtime_error);
+  EXPECT_THROW(isam.marginalCovariance({poseKey(1), poseKey(3)}), std::runtime_error);
+  // Pose 1 is pose 0 (held by the gauge prior) plus one odometry step of unit information.
+  const MatrixXd c1 = isam.marginals({poseKey(1)}).front();
+  EXPECT_NEAR(c1(0, 0), 1.0, 1e-6);
+  EXPECT_NEAR(c1(2, 2), 1.0, 1e-6);
+}
+
 TEST(Isam2, IsRegisteredAsIncremental) {
   bool found = false;
   for (const auto& info : availableBackends())

@@ -208,6 +208,16 @@ TEST(Datasets, W100KeepsEquivalences) {
   EXPECT_TRUE((ds.edges[0].information.topLeftCorner<3, 3>().isIdentity(0.0)));
 }
 
+// An EQUIV pair is the file's statement that two poses are one place, not a measurement that
+// can be wrong: trusted like odometry, so no robust variant weighs it.
+TEST(Datasets, W100EquivalencesAreTrusted) {
+  const PoseGraphProblem p = buildProblem(readDataset(datasetPath("w100.graph")));
+  int trusted = 0;
+  for (int i = p.graph.size() - 40; i < p.graph.size(); ++i)
+    trusted += p.graph[i]->role() == FactorRole::Odometry;
+  EXPECT_EQ(trusted, 40);
+}
+
 TEST(Toro, InformationOrderIsI11I12I22I33I13I23) {
   const Dataset ds = parseToro("VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 10 1 20 30 2 3\n",
                                "order.graph");
