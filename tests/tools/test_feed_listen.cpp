@@ -60,6 +60,37 @@ TEST(LoopdFeed, LogHasOneBatchPerPoseNumberedPerSender) {
   EXPECT_EQ(initial, 3);
 }
 
+// w100's 40 EQUIV pairs reach the server (before: dropped without a word), after the 300
+// edges as loopd-solve numbers them, trusted: odometry within a robot, "none" across two.
+TEST(LoopdFeed, SendsEquivalencesAsTrustedIdentityConstraints) {
+  const std::string log = tmp("w100_equiv.lcmlog");
+  ASSERT_EQ(runTool({kFeed, kData + "/w100.graph", "--robots", "2", "--log", log, "--quiet"},
+                    tmp("equiv.log")),
+            0);
+  std::set<int64_t> ids;
+  int equivalences = 0, crossing = 0;
+  for (const auto& b : readLog(log))
+    for (const auto& f : b.factors) {
+      ids.insert(f.id);
+      if (f.id < 300) continue;
+      ++equivalences;
+      EXPECT_EQ(f.type, factor_t::BETWEEN_SE2);
+      EXPECT_EQ(f.measurement, std::vector<double>({0.0, 0.0, 0.0}));
+      EXPECT_EQ(f.noise[0], 1e6);  // information, upper triangle
+      if (f.keys[0].robot == f.keys[1].robot) {
+        EXPECT_EQ(f.role, factor_t::ROLE_ODOMETRY);
+      } else {
+        ++crossing;
+        EXPECT_EQ(f.role, factor_t::ROLE_LOOP_CLOSURE);
+        EXPECT_EQ(f.robust, "none");
+      }
+    }
+  EXPECT_EQ(equivalences, 40);
+  EXPECT_EQ(ids.size(), 340u);
+  EXPECT_EQ(*ids.rbegin(), 339);
+  EXPECT_GT(crossing, 0);
+}
+
 TEST(LoopdFeed, DeterministicBatches) {
   const std::string a = tmp("a.lcmlog"), b = tmp("b.lcmlog");
   ASSERT_EQ(runTool({kFeed, kData + "/w100.graph", "--robots", "2", "--interleave", "--log", a,

@@ -154,6 +154,36 @@ TEST(LoopdSolve, IncrementalVariantsAtOnceSolveToConvergence) {
   EXPECT_NE(slurp(isam2).find("\"converged\": true"), std::string::npos) << slurp(isam2);
 }
 
+// A part nothing ties to the first pose has no covariance: every solver refuses it alike
+// (before: isam2 wrote its damping's arbitrary numbers and exited 0).
+TEST(LoopdSolve, CovariancesOfAnUntiedPartAreRefusedByEverySolver) {
+  const std::string parts = tempFile("untied.g2o",
+                                     "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n"
+                                     "VERTEX_SE2 2 5 5 0\nVERTEX_SE2 3 6 5 0\n"
+                                     "EDGE_SE2 0 1 1.1 0 0.1 1 0 0 1 0 1\n"
+                                     "EDGE_SE2 2 3 0.9 0.2 0 1 0 0 1 0 1\n");
+  const std::string cov = testing::TempDir() + "/untied_cov.txt";
+  for (const std::string solver : {"lm", "isam2 --incremental", "isam2"}) {
+    const RunResult r = run(parts + " --solver " + solver + " --quiet --covariances " + cov);
+    EXPECT_EQ(r.exitCode, 1) << solver << ": " << r.output;
+    EXPECT_NE(r.output.find("information matrix is singular"), std::string::npos)
+        << solver << ": " << r.output;
+  }
+}
+
+// w100's 40 EQUIV pairs are trusted: the kernels rejected 39 of them as loop closures
+// (dcs: chi2 40557 against the plain optimum's 1.38).
+TEST(LoopdSolve, KernelsKeepW100sEquivalences) {
+  const std::string lm = testing::TempDir() + "/w100_lm.json";
+  const std::string dcs = testing::TempDir() + "/w100_dcs.json";
+  ASSERT_EQ(run(kData + "/w100.graph --quiet --stats " + lm).exitCode, 0);
+  const RunResult r = run(kData + "/w100.graph --solver dcs --quiet --stats " + dcs);
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  const double optimum = loopd::tools::jsonNumber(slurp(lm), "final_chi2", NAN);
+  EXPECT_LT(optimum, 2.0);
+  EXPECT_NEAR(loopd::tools::jsonNumber(slurp(dcs), "final_chi2", NAN), optimum, 1e-3 * optimum);
+}
+
 // A stop before convergence is not an error (the estimate is the best reached) but is said:
 // Gauss-Newton cannot step on a graph whose two parts nothing ties together.
 TEST(LoopdSolve, AStopBeforeConvergenceIsAWarning) {

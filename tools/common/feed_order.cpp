@@ -56,4 +56,11 @@ loopd::factor_t FeedOrder::factor(const io::Edge& e, int robotOffset) const {
   return edgeFactor(e, from + robotOffset, to + robotOffset, odometry);
 }
 
+loopd::factor_t FeedOrder::equivalenceFactor(const io::Edge& e, int robotOffset) const {
+  const int from = robotOf(e.from), to = robotOf(e.to);
+  loopd::factor_t f = edgeFactor(e, from + robotOffset, to + robotOffset, from == to);
+  if (from != to) f.robust = "none";  // the wire's odometry joins one robot's poses
+  return f;
+}
+
 }  // namespace loopd::tools

@@ -29,6 +29,9 @@ class FeedOrder {
   long dueAt(const io::Edge& e) const;
   /// The edge as the wire's factor_t in its robots' frames, robot ids + robotOffset.
   loopd::factor_t factor(const io::Edge& e, int robotOffset = 0) const;
+  /// An EQUIV pair's edge (io::equivalenceEdge), trusted as loopd-solve trusts it: odometry
+  /// within one robot, a loop closure with robust "none" (never down-weighted) across two.
+  loopd::factor_t equivalenceFactor(const io::Edge& e, int robotOffset = 0) const;
 
  private:
   std::vector<std::int64_t> order_;

@@ -11,6 +11,8 @@
 // file edge indices. Edges between consecutive ids of one robot are odometry; every other edge
 // (including those crossing segments) is a loop closure. A robot's first pose is sent with the
 // initial value identity (its own frame); the server composes the others from odometry.
+// TORO EQUIV pairs go as trusted identity constraints (FeedOrder::equivalenceFactor), ids
+// following the edges' as in loopd-solve (TORO has no HYPOTHESES: no group id is taken).
 // The k-th batch of a sender has sequence k, so feeding the same file again is a resend.
 // A HYPOTHESES group goes as one ambiguous_factor_t (id = number of edges + its index in file
 // order) in the batch of the pose that completes it: MULTI_MEASUREMENT when its alternatives
@@ -147,6 +149,19 @@ int run(const Options& o) {
     else
       due[static_cast<size_t>(at)].push_back(&e);
   }
+  // TORO EQUIV pairs, numbered after the edges as loopd-solve numbers them.
+  std::vector<io::Edge> equivalences;
+  std::vector<std::vector<const io::Edge*>> dueEquivalences(n);
+  equivalences.reserve(ds.equivalences.size());  // the pointers below stay valid
+  for (const auto& [a, b] : ds.equivalences) {
+    equivalences.push_back(
+        io::equivalenceEdge(a, b, static_cast<int>(ds.edges.size() + equivalences.size())));
+    const long at = feed.dueAt(equivalences.back());
+    if (at < 0)
+      ++skipped;
+    else
+      dueEquivalences[static_cast<size_t>(at)].push_back(&equivalences.back());
+  }
 
   // Where batches go.
   std::unique_ptr<lcm::LCM> lcm;
@@ -194,6 +209,7 @@ int run(const Options& o) {
         pub.initialValue(KeyRef::pose(r, id), client::Pose2{});
     }
     for (const io::Edge* e : due[i]) pub.factor(feed.factor(*e));
+    for (const io::Edge* e : dueEquivalences[i]) pub.factor(feed.equivalenceFactor(*e));
     for (const io::HypothesisGroup* g : dueGroups[i]) {
       std::vector<loopd::factor_t> alternatives;
       for (int k = 0; k < g->count; ++k) {
