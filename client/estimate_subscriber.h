@@ -3,6 +3,11 @@
 // (assembling chunked full snapshots, applying deltas), the latest covariances, status and
 // errors, and calls back on updates. Handlers run inside lcm.handle*() on the caller's thread;
 // the accessors are safe from any thread.
+//
+// No message says a variable is gone, so the subscriber checks its tables against each status:
+// a status at least as new as every table that counts fewer robots, poses or landmarks than
+// the tables hold (an empty graph after RESET, a server restarted without --resume) proves
+// them stale, and the subscriber forgets every table (see onForget).
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -52,6 +57,9 @@ class EstimateSubscriber {
   std::int64_t errorsReceived() const;
   std::vector<loopd::error_t> errors() const;
 
+  /// Times the tables were forgotten as stale (a RESET, a restart without --resume).
+  std::int64_t forgets() const;
+
   /// Called after a robot's table changed (a delta chunk or a complete snapshot).
   void onEstimate(std::function<void(const RobotEstimate&, const loopd::estimate_t&)> cb) {
     onEstimate_ = std::move(cb);
@@ -61,6 +69,10 @@ class EstimateSubscriber {
   }
   void onStatus(std::function<void(const loopd::status_t&)> cb) { onStatus_ = std::move(cb); }
   void onError(std::function<void(const loopd::error_t&)> cb) { onError_ = std::move(cb); }
+  /// Called (before onStatus) when a status proved every table stale and they were forgotten;
+  /// the argument is that status's update_seq. Deltas rebuild the tables only partly: a
+  /// follower that needs them whole asks for a full estimate (command_t.REQUEST_ESTIMATE).
+  void onForget(std::function<void(std::int64_t)> cb) { onForget_ = std::move(cb); }
 
  private:
   static void estimateMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::estimate_t* m,
@@ -72,6 +84,10 @@ class EstimateSubscriber {
   static void errorMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::error_t* m,
                        EstimateSubscriber* self);
   void handleEstimate(const loopd::estimate_t& m);
+  bool applySnapshotChunk(const loopd::estimate_t& m);
+  /// The tables hold a robot, pose or landmark the server at status `s` no longer has.
+  bool tablesExceed(const loopd::status_t& s) const;
+  void forgetTables(std::int64_t updateSeq);
 
   lcm::LCM& lcm_;
   mutable std::mutex mu_;
@@ -85,11 +101,14 @@ class EstimateSubscriber {
   std::map<std::int32_t, std::pair<std::int64_t, std::vector<double>>> covariances_;
   loopd::status_t status_{};
   std::vector<loopd::error_t> errors_;
-  std::int64_t estimates_ = 0, errorCount_ = 0;
+  std::int64_t estimates_ = 0, errorCount_ = 0, forgets_ = 0;
+  std::int64_t newestTableSeq_ = 0;  // highest update_seq applied to a table
+  std::int64_t forgottenBelow_ = 0;  // estimates older than this belong to a forgotten graph
   std::function<void(const RobotEstimate&, const loopd::estimate_t&)> onEstimate_;
   std::function<void(const loopd::covariance_t&)> onCovariance_;
   std::function<void(const loopd::status_t&)> onStatus_;
   std::function<void(const loopd::error_t&)> onError_;
+  std::function<void(std::int64_t)> onForget_;
   std::vector<void*> subscriptions_;
 };
 

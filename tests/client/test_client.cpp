@@ -224,4 +224,110 @@ TEST(EstimateSubscriber, AssemblesSnapshotsAndDeltas) {
             "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304");
 }
 
+status_t statusOf(int64_t seq, int32_t robots, int64_t poses, int64_t landmarks = 0) {
+  status_t s{};
+  s.update_seq = seq;
+  s.solver = "isam2";
+  s.robots = robots;
+  s.poses = poses;
+  s.landmarks = landmarks;
+  s.decisions_chunk_count = 1;
+  return s;
+}
+
+/// A subscriber on memq:// and the X_ prefix, with helpers that publish and deliver at once.
+struct Follower {
+  lcm::LCM lcm{"memq://"};
+  client::EstimateSubscriber sub{lcm, "X_"};
+  std::vector<int64_t> forgotAt;
+  Follower() {
+    sub.onForget([this](int64_t seq) { forgotAt.push_back(seq); });
+  }
+  void estimate(const estimate_t& e) {
+    lcm.publish("X_ESTIMATE", &e);
+    lcm.handleTimeout(10);
+  }
+  void status(const status_t& s) {
+    lcm.publish("X_STATUS", &s);
+    lcm.handleTimeout(10);
+  }
+  void covariance(int robot, int64_t index, int64_t seq) {
+    covariance_t c{};
+    c.update_seq = seq;
+    c.keys = {client::wireKey(KeyRef::pose(robot, index))};
+    c.num_keys = 1;
+    c.dims = {3};
+    c.values = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    c.num_values = 9;
+    c.chunk_count = 1;
+    lcm.publish("X_COVARIANCE", &c);
+    lcm.handleTimeout(10);
+  }
+};
+
+// After RESET the server publishes an empty graph's status (and repeats it in every
+// heartbeat); before the fix the subscriber kept every robot and pose it had.
+TEST(EstimateSubscriber, ForgetsEverythingWhenANewerStatusReportsAnEmptyGraph) {
+  Follower f;
+  ASSERT_TRUE(f.lcm.good());
+  f.estimate(chunk(10, 0, false, 0, 1, {0, 1, 2}));
+  f.estimate(chunk(10, 1, false, 0, 1, {0, 1}));
+  f.covariance(0, 2, 10);
+  f.status(statusOf(10, 2, 5));  // the tables match the server: nothing forgotten
+  f.status(statusOf(9, 0, 0));   // older than the tables (reordered): proves nothing
+  EXPECT_EQ(f.sub.robots(), (std::vector<int32_t>{0, 1}));
+  EXPECT_TRUE(f.forgotAt.empty());
+
+  f.status(statusOf(11, 0, 0));  // RESET: resetAll(), ++update_seq, status
+  EXPECT_TRUE(f.sub.robots().empty());
+  EXPECT_TRUE(f.sub.all().empty());
+  EXPECT_TRUE(f.sub.latestCovariances().empty());
+  EXPECT_EQ(f.forgotAt, std::vector<int64_t>{11});
+  EXPECT_EQ(f.sub.forgets(), 1);
+  EXPECT_EQ(f.sub.lastStatus().update_seq, 11);
+
+  f.estimate(chunk(10, 1, false, 0, 1, {7}));  // a late delta of the forgotten graph
+  f.covariance(1, 7, 10);
+  EXPECT_TRUE(f.sub.robots().empty());
+  EXPECT_TRUE(f.sub.latestCovariances().empty());
+  f.status(statusOf(11, 0, 0));  // the heartbeat repeats it: nothing more to forget
+  EXPECT_EQ(f.sub.forgets(), 1);
+
+  f.estimate(chunk(12, 0, false, 0, 1, {0}));  // the new graph
+  f.status(statusOf(12, 1, 1));
+  EXPECT_EQ(f.sub.robots(), std::vector<int32_t>{0});
+  EXPECT_EQ(f.sub.robot(0).poses.size(), 1u);
+}
+
+// A server restarted without --resume that gets data before its first heartbeat never
+// reports an empty graph, but its status counts fewer robots and poses than the old tables.
+TEST(EstimateSubscriber, ForgetsStaleTablesOfARestartedServer) {
+  Follower f;
+  f.estimate(chunk(100, 0, false, 0, 1, {0, 1, 2, 3, 4}));
+  f.estimate(chunk(100, 1, false, 0, 1, {0, 1, 2}));
+  f.status(statusOf(100, 2, 8));
+  // The new server counts from its start time: a much higher update_seq.
+  f.estimate(chunk(5001, 0, false, 0, 1, {0, 1}));
+  EXPECT_EQ(f.sub.robot(0).poses.size(), 5u);  // new values over old ones: no way to tell yet
+  f.status(statusOf(5001, 1, 2));
+  EXPECT_EQ(f.forgotAt, std::vector<int64_t>{5001});
+  EXPECT_TRUE(f.sub.robots().empty());
+  f.estimate(chunk(5001, 0, true, 0, 1, {0, 1}));  // a full snapshot (REQUEST_ESTIMATE)
+  f.estimate(chunk(5002, 0, false, 0, 1, {2}));
+  f.status(statusOf(5002, 1, 3));
+  EXPECT_EQ(f.sub.robots(), std::vector<int32_t>{0});
+  EXPECT_EQ(f.sub.robot(0).poses.size(), 3u);
+  EXPECT_EQ(f.sub.forgets(), 1);
+}
+
+// estimate_t.full_snapshot: "anything absent no longer exists", a robot with nothing too.
+TEST(EstimateSubscriber, AnEmptyFullSnapshotRemovesTheRobot) {
+  Follower f;
+  f.estimate(chunk(5, 0, false, 0, 1, {0, 1}));
+  f.estimate(chunk(5, 3, false, 0, 1, {0}));
+  f.estimate(chunk(6, 3, true, 0, 1, {}));
+  EXPECT_EQ(f.sub.robots(), std::vector<int32_t>{0});
+  EXPECT_EQ(f.sub.robot(3).poses.size(), 0u);
+}
+
 }  // namespace

@@ -14,6 +14,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string_view>
+#include <system_error>
 #include <vector>
 
 #include "loopd_view_assets.h"
@@ -293,7 +294,7 @@ void HttpServer::stop() {
   {
     std::unique_lock<std::mutex> l(connMu_);
     for (int fd : open_) ::shutdown(fd, SHUT_RDWR);
-    connCv_.wait_for(l, std::chrono::seconds(5), [&] { return open_.empty(); });
+    connCv_.wait_for(l, std::chrono::seconds(5), [&] { return open_.empty() && refusing_ == 0; });
   }
   if (listenFd_ >= 0) ::close(listenFd_);
   for (int& p : wakePipe_)
@@ -303,6 +304,7 @@ void HttpServer::stop() {
 
 void HttpServer::acceptLoop() {
   while (!stopping_) {
+    if (!refusalSlotFree()) continue;  // the rest wait in the listen backlog meanwhile
     pollfd fds[2] = {{listenFd_, POLLIN, 0}, {wakePipe_[0], POLLIN, 0}};
     const int n = ::poll(fds, 2, 1000);
     if (n < 0 && errno != EINTR) break;
@@ -321,8 +323,12 @@ void HttpServer::acceptLoop() {
       std::lock_guard<std::mutex> l(connMu_);
       if (static_cast<int>(open_.size()) >= o_.maxConnections) {
         ++stats_.bad;
-        respondError(fd, 503, "Retry-After: 1\r\n");
-        ::close(fd);
+        try {
+          std::thread([this, fd] { refuse(fd); }).detach();
+          ++refusing_;
+        } catch (const std::system_error&) {
+          ::close(fd);  // no thread to answer with: the client sees a reset
+        }
         continue;
       }
       open_.insert(fd);
@@ -340,6 +346,25 @@ void HttpServer::acceptLoop() {
       connCv_.notify_all();
     }).detach();
   }
+}
+
+bool HttpServer::refusalSlotFree() {
+  std::unique_lock<std::mutex> l(connMu_);
+  return connCv_.wait_for(l, std::chrono::milliseconds(100),
+                          [&] { return refusing_ < o_.maxRefusing || stopping_; });
+}
+
+// Past the connection limit. The client's request is in the socket or on its way: closing at
+// once, with input unread, would reset the connection, and a reset can discard the answer
+// before the client reads it. So answer, half-close and drain like the other errors do, on a
+// thread of its own (the drain takes up to half a second).
+void HttpServer::refuse(int fd) {
+  respondError(fd, 503, "Retry-After: 1\r\n");
+  lingerDrain(fd);
+  std::lock_guard<std::mutex> l(connMu_);
+  ::close(fd);
+  --refusing_;
+  connCv_.notify_all();
 }
 
 void HttpServer::serve(int fd) {

@@ -8,7 +8,8 @@
 // Bad requests get a clean status and the connection is closed: 400 (malformed request line
 // or header), 403 (a Host that is not a loopback name while bound to loopback: no DNS
 // rebinding), 404 (unknown path), 405 (not GET/HEAD), 408 (headers too slow), 431 (headers
-// over 16 KiB), 503 (too many connections). SSE clients always receive the newest snapshot
+// over 16 KiB), 503 with Retry-After (too many connections: answered and drained before the
+// close, never a reset). SSE clients always receive the newest snapshot
 // only: a slow tab skips the ones it could not take, it never queues them.
 #include <atomic>
 #include <condition_variable>
@@ -45,6 +46,7 @@ struct HttpOptions {
   std::string bind = "127.0.0.1";
   int port = 8080;          // 0 = any free port (see HttpServer::port())
   int maxConnections = 64;  // beyond this: 503 and close
+  int maxRefusing = 64;     // 503s being answered at once; more connections wait to be accepted
   int headerTimeoutMs = 10000;
   std::size_t maxHeaderBytes = 16384;
   int keepaliveMs = 15000;  // SSE comment line when nothing new arrives
@@ -68,6 +70,9 @@ class HttpServer {
  private:
   void acceptLoop();
   void serve(int fd);
+  void refuse(int fd);
+  /// Waits (briefly) until fewer than maxRefusing refusals are under way.
+  bool refusalSlotFree();
   void serveEvents(int fd, bool head);
 
   HttpOptions o_;
@@ -81,6 +86,7 @@ class HttpServer {
   std::mutex connMu_;
   std::condition_variable connCv_;
   std::set<int> open_;  // fds of live connections
+  int refusing_ = 0;    // connections being answered 503
 };
 
 }  // namespace loopd::view

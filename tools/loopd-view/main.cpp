@@ -121,17 +121,21 @@ int run(const Options& o) {
   auto lastSnapshot = Clock::now() - std::chrono::seconds(1);
   auto start = Clock::now();
   bool requested = false, statusSeen = false;
+  auto lastRequest = Clock::now() - std::chrono::seconds(1);
   std::uint64_t seq = 1;
   std::size_t lastSize = 0;
   while (!gStop) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
     if (o.request) {
-      // Ask once the LCM thread is listening, and again when a server first shows up.
+      // Ask once the LCM thread is listening, again when a server first shows up, and when
+      // the view lost or forgot something (at most once a second: full estimates are big).
       const bool s = state.statusSeen();
       if ((!requested && Clock::now() - start > std::chrono::milliseconds(300)) ||
-          (s && !statusSeen)) {
+          (s && !statusSeen) ||
+          (state.wantsEverything() && Clock::now() - lastRequest >= std::chrono::seconds(1))) {
         state.requestEverything();
         requested = true;
+        lastRequest = Clock::now();
       }
       statusSeen = s;
     }

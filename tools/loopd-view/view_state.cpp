@@ -2,10 +2,12 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <iterator>
 #include <unordered_map>
 
 #include <unistd.h>
@@ -116,13 +118,18 @@ ViewState::ViewState(lcm::LCM& lcm, std::string channelPrefix, std::string lcmUr
   sub_.onCovariance([this](const loopd::covariance_t&) { touch(); });
   sub_.onStatus([this](const loopd::status_t& s) { onStatus(s); });
   sub_.onError([this](const loopd::error_t& e) { onError(e); });
+  sub_.onForget([this](std::int64_t) { onForget(); });
   auto* s = lcm_.subscribeFunction(prefix_ + "FACTORS", &ViewState::factorsMsg, this);
   if (s) s->setQueueCapacity(0);
   factorsSub_ = s;
+  auto* c = lcm_.subscribeFunction(prefix_ + "COMMAND", &ViewState::commandMsg, this);
+  if (c) c->setQueueCapacity(0);
+  commandSub_ = c;
 }
 
 ViewState::~ViewState() {
-  if (factorsSub_) lcm_.unsubscribe(static_cast<lcm::Subscription*>(factorsSub_));
+  for (void* s : {factorsSub_, commandSub_})
+    if (s) lcm_.unsubscribe(static_cast<lcm::Subscription*>(s));
 }
 
 void ViewState::touch() {
@@ -147,8 +154,14 @@ bool ViewState::statusSeen() const {
   return statusSeen_;
 }
 
+bool ViewState::wantsEverything() const {
+  std::lock_guard<std::mutex> l(mu_);
+  return wantEverything_;
+}
+
 void ViewState::requestEverything() {
   std::lock_guard<std::mutex> l(mu_);
+  wantEverything_ = false;
   for (const auto cmd : {loopd::command_t::REQUEST_ESTIMATE, loopd::command_t::REQUEST_STATUS}) {
     loopd::command_t c{};
     c.utime = nowUs();
@@ -161,17 +174,125 @@ void ViewState::requestEverything() {
   }
 }
 
+namespace {
+constexpr std::size_t kMaxPendingBatches = 10000;  // unsettled (the server never saw them?)
+constexpr std::size_t kMaxClosures = 1000000;      // a bound on what a flood can make us keep
+constexpr std::size_t kMaxSenders = 10000;
+constexpr std::size_t kMaxSequencesAbove = 100000;  // out of order, per sender
+}  // namespace
+
+bool ViewState::SeenSequences::insert(std::int64_t sequence) {
+  if (sequence <= contiguous || !above.insert(sequence).second) return false;
+  while (!above.empty() && *above.begin() == contiguous + 1) {
+    ++contiguous;
+    above.erase(above.begin());
+  }
+  if (above.size() > kMaxSequencesAbove) above.clear();  // less strict, bounded
+  return true;
+}
+
 void ViewState::factorsMsg(const lcm::ReceiveBuffer*, const std::string&,
                            const loopd::factor_batch_t* m, ViewState* self) {
   std::lock_guard<std::mutex> l(self->mu_);
   ++self->factorBatches_;
-  for (const auto& f : m->factors) {
+  self->trackBatch(*m);
+}
+
+void ViewState::trackBatch(const loopd::factor_batch_t& m) {
+  // The server refuses a batch without a usable identity, and ignores one it has seen.
+  if (m.sender.empty() || m.sender.size() > 63 || m.sequence < 1) return;
+  const BatchName name{m.sender, m.sequence};
+  if (seenBatches_.size() >= kMaxSenders) seenBatches_.clear();  // less strict, bounded
+  if (!seenBatches_[m.sender].insert(m.sequence)) {
+    ++duplicates_;
+    return;
+  }
+  PendingBatch b;
+  b.name = name;
+  for (const auto& f : m.factors) {
     if (f.role != loopd::factor_t::ROLE_LOOP_CLOSURE || f.keys.size() != 2) continue;
     if (f.keys[0].kind != loopd::key_t::POSE || f.keys[1].kind != loopd::key_t::POSE) continue;
-    if (self->closures_.size() >= 1000000) break;  // a bound on what a flood can make us keep
-    self->closures_[{m->sender, f.id}] = Closure{f.keys[0], f.keys[1]};
+    b.closures.emplace_back(f.id, Closure{f.keys[0], f.keys[1]});
   }
-  for (const auto id : m->remove_ids) self->closures_.erase({m->sender, id});
+  for (const auto id : m.remove_ids) {
+    const auto it = closures_.find({m.sender, id});
+    if (it == closures_.end()) continue;
+    b.removed.emplace_back(id, it->second);
+    closures_.erase(it);
+  }
+  if (b.closures.empty() && b.removed.empty()) return;  // nothing to draw or bring back
+  const std::uint64_t arrival = ++arrivals_;
+  for (const auto& [id, c] : b.closures) pendingByClosure_[{m.sender, id}].insert(arrival);
+  pendingByBatch_[name] = arrival;
+  pending_.emplace(arrival, std::move(b));
+  if (pending_.size() > kMaxPendingBatches) dropPending(pending_.begin()->first);
+}
+
+void ViewState::dropPending(std::uint64_t arrival) {
+  const auto it = pending_.find(arrival);
+  if (it == pending_.end()) return;
+  for (const auto& [id, c] : it->second.closures) {
+    const auto ix = pendingByClosure_.find({it->second.name.first, id});
+    if (ix == pendingByClosure_.end()) continue;
+    ix->second.erase(arrival);
+    if (ix->second.empty()) pendingByClosure_.erase(ix);
+  }
+  pendingByBatch_.erase(it->second.name);
+  pending_.erase(it);
+}
+
+/// The server decided on `closure`: the oldest unsettled batch carrying it was accepted (a
+/// later one reusing the id is refused with DUPLICATE_FACTOR_ID while it lives).
+void ViewState::adoptBatchWith(const FactorName& closure) {
+  if (closures_.count(closure)) return;  // a decision about a closure already placed
+  const auto ix = pendingByClosure_.find(closure);
+  if (ix == pendingByClosure_.end()) return;  // sent before the view started: unmapped
+  const std::uint64_t arrival = *ix->second.begin();
+  const PendingBatch& b = pending_.at(arrival);
+  for (const auto& [id, c] : b.closures)
+    if (closures_.size() < kMaxClosures) closures_[{b.name.first, id}] = c;
+  dropPending(arrival);
+}
+
+void ViewState::refuseBatch(const BatchName& batch) {
+  const auto it = pendingByBatch_.find(batch);
+  if (it == pendingByBatch_.end()) return;
+  const PendingBatch& b = pending_.at(it->second);
+  for (const auto& [id, c] : b.removed) closures_.emplace(FactorName{b.name.first, id}, c);
+  dropPending(it->second);
+}
+
+/// A complete listing names every uncertain factor the server has: the rest are gone.
+void ViewState::pruneClosuresWithoutDecision() {
+  for (auto it = closures_.begin(); it != closures_.end();)
+    it = decisions_.count(it->first) ? std::next(it) : closures_.erase(it);
+}
+
+void ViewState::commandMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::command_t* m,
+                           ViewState* self) {
+  if (m->command != loopd::command_t::RESET) return;
+  std::lock_guard<std::mutex> l(self->mu_);
+  // Senders may start their sequences again at once, before the server's status says the
+  // graph is gone: their batches are not duplicates.
+  self->seenBatches_.clear();
+  self->resetMark_ = self->arrivals_;
+}
+
+void ViewState::onForget() {
+  std::lock_guard<std::mutex> l(mu_);
+  dirty_ = true;
+  closures_.clear();
+  decisions_.clear();
+  pendingFull_.clear();
+  pendingFullSeq_ = -1;
+  seenBatches_.clear();
+  // Batches from before a RESET command belong to the dropped graph; later ones (and all, after
+  // a restart, which no command announces) may still be settled by the server.
+  while (!pending_.empty() && pending_.begin()->first <= resetMark_)
+    dropPending(pending_.begin()->first);
+  resetMark_ = 0;
+  for (auto& [arrival, b] : pending_) b.removed.clear();
+  wantEverything_ = true;
 }
 
 void ViewState::onStatus(const loopd::status_t& s) {
@@ -181,12 +302,22 @@ void ViewState::onStatus(const loopd::status_t& s) {
   ++statusMsgs_;
   lastMessageUs_ = nowUs();
   statusSeen_ = true;
+  // Every update publishes a status: a gap in update_seq is a lost one, and with it decisions.
+  if (lastStatusSeq_ > 0 && s.update_seq > lastStatusSeq_ + 1) wantEverything_ = true;
+  lastStatusSeq_ = std::max(lastStatusSeq_, s.update_seq);
+  applyDecisions(s);
+}
+
+void ViewState::applyDecisions(const loopd::status_t& s) {
   auto put = [](std::map<FactorName, Decision>& t, const loopd::loop_decision_t& d) {
     if (d.ambiguous) return;  // ambiguous measurements have no single pair of endpoints
     t[{d.sender, d.factor_id}] = Decision{d.accepted != 0, d.weight};
   };
   if (!s.decisions_full) {
-    for (const auto& d : s.decisions) put(decisions_, d);
+    for (const auto& d : s.decisions) {
+      put(decisions_, d);
+      if (!d.ambiguous) adoptBatchWith({d.sender, d.factor_id});
+    }
     return;
   }
   if (s.decisions_chunk_index == 0 || s.update_seq != pendingFullSeq_) {
@@ -198,6 +329,8 @@ void ViewState::onStatus(const loopd::status_t& s) {
     decisions_.swap(pendingFull_);
     pendingFull_.clear();
     pendingFullSeq_ = -1;
+    pruneClosuresWithoutDecision();
+    for (const auto& [name, d] : decisions_) adoptBatchWith(name);
   }
 }
 
@@ -210,6 +343,8 @@ void ViewState::onError(const loopd::error_t& e) {
   ++errorsByCode_[e.code];
   recentErrors_.push_back(e);
   while (recentErrors_.size() > 20) recentErrors_.pop_front();
+  // A batch is refused whole; command errors carry a request id and no sequence.
+  if (e.request_id == 0 && e.sequence >= 1) refuseBatch({e.sender, e.sequence});
 }
 
 std::string ViewState::renderJson(std::uint64_t seq) {
@@ -391,14 +526,17 @@ std::string ViewState::renderJson(std::uint64_t seq) {
   }
   o += ']';
 
-  // Loop closures with both ends in the estimate: [robotA, ordinalA, robotB, ordinalB, state,
-  // weight]; state 1 accepted, 0 rejected, 2 no decision (yet). Decisions whose factor was
+  // Accepted loop closures with both ends in the estimate: [robotA, ordinalA, robotB, ordinalB,
+  // state, weight]; state 1 accepted, 0 rejected (as a robust solver judges it). Closures
+  // still waiting for the server are counted (pending), not drawn; decisions whose factor was
   // never seen on the factor channel (the view started late) have no endpoints: counted only.
-  std::int64_t accepted = 0, rejected = 0, undecided = 0, unplaced = 0, unmapped = 0,
-               unmappedRejected = 0;
+  std::int64_t accepted = 0, rejected = 0, unplaced = 0, unmapped = 0, unmappedRejected = 0,
+               pendingClosures = 0;
   o += ",\"links\":[";
   first = true;
   for (const auto& [name, cl] : closures_) {
+    const auto d = decisions_.find(name);
+    if (d == decisions_.end()) continue;  // pruned with the next complete listing
     auto ra = ordinal.find(cl.a.robot), rb = ordinal.find(cl.b.robot);
     if (ra == ordinal.end() || rb == ordinal.end()) {
       ++unplaced;
@@ -409,14 +547,8 @@ std::string ViewState::renderJson(std::uint64_t seq) {
       ++unplaced;
       continue;
     }
-    int state = 2;
-    double w = 1.0;
-    auto d = decisions_.find(name);
-    if (d != decisions_.end()) {
-      state = d->second.accepted ? 1 : 0;
-      w = d->second.weight;
-    }
-    (state == 1 ? accepted : state == 0 ? rejected : undecided)++;
+    const int state = d->second.accepted ? 1 : 0;
+    (state == 1 ? accepted : rejected)++;
     if (!first) o += ',';
     first = false;
     o += '[';
@@ -430,7 +562,7 @@ std::string ViewState::renderJson(std::uint64_t seq) {
     o += ',';
     num(o, std::int64_t{state});
     o += ',';
-    num(o, w, 3);
+    num(o, d->second.weight, 3);
     o += ']';
   }
   o += ']';
@@ -439,12 +571,14 @@ std::string ViewState::renderJson(std::uint64_t seq) {
       ++unmapped;
       unmappedRejected += d.accepted ? 0 : 1;
     }
+  for (const auto& [arrival, b] : pending_)
+    pendingClosures += static_cast<std::int64_t>(b.closures.size());
   o += ",\"link_counts\":{\"accepted\":";
   num(o, accepted);
   o += ",\"rejected\":";
   num(o, rejected);
-  o += ",\"undecided\":";
-  num(o, undecided);
+  o += ",\"pending\":";
+  num(o, pendingClosures);
   o += ",\"unplaced\":";
   num(o, unplaced);
   o += ",\"decisions\":";
@@ -453,6 +587,8 @@ std::string ViewState::renderJson(std::uint64_t seq) {
   num(o, unmapped);
   o += ",\"unmapped_rejected\":";
   num(o, unmappedRejected);
+  o += ",\"duplicate_batches\":";
+  num(o, duplicates_);
   o += '}';
 
   // Errors.

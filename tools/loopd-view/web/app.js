@@ -321,7 +321,8 @@
       ['rejected (server)', st ? st.loop_closures_rejected : '—'],
       ['drawn: accepted', lc.accepted],
       ['drawn: rejected', lc.rejected],
-      ['drawn: no decision yet', lc.undecided],
+      ['seen, not yet accepted (not drawn)', lc.pending],
+      ['duplicate batches (ignored)', lc.duplicate_batches],
       ['decisions without endpoints', lc.unmapped_decisions + (lc.unmapped_rejected ? ` (${lc.unmapped_rejected} rejected)` : '')],
     ]);
     const e = state.errors || { count: 0, recent: [], by_code: {} };
