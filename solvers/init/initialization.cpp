@@ -1,6 +1,5 @@
 #include "solvers/init/initialization.h"
 
-#include <Eigen/Sparse>
 #include <cmath>
 #include <deque>
 #include <stdexcept>
@@ -8,13 +7,12 @@
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
 #include "solvers/factors/landmark_factors.h"
-#include "solvers/linear/sparse_cholesky.h"
+#include "solvers/init/landmark_headings.h"
+#include "solvers/init/sparse_normal_solve.h"
 
 namespace loopd {
 
 namespace {
-
-using Triplets = std::vector<Eigen::Triplet<double>>;
 
 // Unknowns of a linear initialisation problem: `dim` scalars per free variable; the anchor
 // (and anything not connected) is known.
@@ -27,7 +25,7 @@ struct LinearUnknowns {
 // either unknown (index ≥ 0) or known (value taken from `known`).
 template <int D>
 struct BlockNormalEquations {
-  Triplets triplets;
+  InitTriplets triplets;
   Eigen::MatrixXd rhs;  // count × columns
   const LinearUnknowns& u;
   BlockNormalEquations(const LinearUnknowns& unknowns, int columns)
@@ -62,21 +60,7 @@ struct BlockNormalEquations {
       for (int b = 0; b < D; ++b)
         if (M(a, b) != 0.0) triplets.emplace_back(r + a, c + b, M(a, b));
   }
-  Eigen::MatrixXd solve() {
-    Eigen::SparseMatrix<double> H(u.count, u.count);
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    const Eigen::SparseMatrix<double> upper = H.triangularView<Eigen::Upper>();
-    std::vector<int> colStart(upper.outerIndexPtr(), upper.outerIndexPtr() + u.count + 1);
-    std::vector<int> rowIndex(upper.innerIndexPtr(), upper.innerIndexPtr() + upper.nonZeros());
-    std::vector<double> values(upper.valuePtr(), upper.valuePtr() + upper.nonZeros());
-    SparseCholesky cholesky;
-    cholesky.analyze(u.count, colStart, rowIndex, /*natural=*/false);
-    if (!cholesky.factorize(values))
-      throw std::runtime_error("linear initialisation: singular system");
-    Eigen::MatrixXd x(u.count, rhs.cols());
-    cholesky.solve(rhs.data(), x.data(), static_cast<int>(rhs.cols()));
-    return x;
-  }
+  Eigen::MatrixXd solve() const { return solveNormalEquations(u.count, triplets, rhs); }
 };
 
 // Breadth-first reachability from the anchor over between and pose–point factors, so
@@ -189,6 +173,14 @@ Values initializeOrientationFirst2D(const FactorGraph& graph, const Values& gues
     const Eigen::MatrixXd sol = angles.solve();
     for (int s = 0; s < guess.size(); ++s)
       if (ut.index[s] >= 0) theta[s] = sol(ut.index[s], 0);
+  }
+  // Landmark re-sightings correct headings that between factors alone dead-reckon. A graph
+  // the relaxation cannot fix (a pose held by one sighting only) keeps these headings.
+  if (hasPointSightings2D(graph)) {
+    try {
+      theta = landmarkAidedHeadings2D(graph, guess, anchorSlot, theta);
+    } catch (const std::runtime_error&) {
+    }
   }
 
   // 2) Positions (and landmarks): tj − ti = R(θi)·tz with the rotated translation weight.

@@ -2,7 +2,9 @@
 // Initial estimates that avoid the local minima an odometry start falls into:
 //  - 2D, orientation first (LAGO-style, Carlone et al.): orientations along a spanning tree
 //    fix each relative angle's multiple of 2π; a linear least-squares solve over all edges
-//    gives the orientations; a second linear solve gives positions (and 2D landmarks).
+//    gives the orientations; with pose–point landmark sightings, a relaxed joint solve then
+//    takes the headings from the sightings too (landmark_headings.h); a second linear solve
+//    gives positions (and 2D landmarks).
 //  - 3D, chordal relaxation (Carlone et al., ICRA 2015): rotations from a linear solve that
 //    ignores orthogonality, projected to SO(3); then positions (and 3D landmarks) linearly.
 // Only between and pose–point factors are used; the anchor pose keeps its guessed value.

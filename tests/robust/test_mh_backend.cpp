@@ -22,8 +22,7 @@ namespace {
 
 const std::string kDatasets = LOOPD_DATASETS_DIR;
 
-// The outlier-free optimum as loopd-solve --incremental reaches it (on Victoria Park the batch
-// solvers stop in a worse local minimum from their linear start).
+// The outlier-free optimum as loopd-solve --incremental reaches it.
 double optimumChi2(const io::Dataset& clean) {
   const PoseGraphProblem p = buildProblem(clean);
   auto isam2 = makeBackend("isam2");
