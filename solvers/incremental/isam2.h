@@ -74,6 +74,11 @@ class Isam2Backend : public Backend {
   /// Joint marginal by sparse solves along the root paths of the keys' cliques (the general
   /// path; marginalCovariance uses clique marginals when the keys share a clique).
   Eigen::MatrixXd marginalCovarianceByPathSolve(const std::vector<Key>& keys);
+  /// False when a damped clique lies on k's path to the root (a part of the graph nothing
+  /// ties to the first pose): its marginal is then the damping's, arbitrary. The robust
+  /// layers read such a marginal as the huge uncertainty it stands for; loopd-solve refuses
+  /// to write it, as the batch marginals refuse a singular information matrix.
+  bool marginalDetermined(Key k) const;
 
   const Values& linearizationPoint() const { return theta_; }
   const Isam2UpdateStats& lastUpdateStats() const { return stats_; }

@@ -14,7 +14,6 @@
 #include <stdexcept>
 
 #include "solvers/incremental/isam2.h"
-#include "solvers/marginals/singular_information.h"
 
 namespace loopd {
 
@@ -27,11 +26,13 @@ int Isam2Backend::varIndex(Key k) const {
   if (v < 0) throw std::invalid_argument("marginal of unknown variable " + keyToString(k));
   if (cliqueOf_[v] < 0)
     throw std::invalid_argument("marginal of " + keyToString(k) + ", which no factor constrains");
-  // A damped clique on the way to the root: the covariance would be the damping's, not the
-  // graph's. Refused, as the batch marginals refuse a singular information matrix.
-  for (int c = cliqueOf_[v]; c >= 0; c = cliques_[c].parent)
-    if (cliques_[c].damped) throw std::runtime_error(kSingularInformationMessage);
   return v;
+}
+
+bool Isam2Backend::marginalDetermined(Key k) const {
+  for (int c = cliqueOf_[varIndex(k)]; c >= 0; c = cliques_[c].parent)
+    if (cliques_[c].damped) return false;
+  return true;
 }
 
 bool Isam2Backend::isInRootClique(Key key) const {

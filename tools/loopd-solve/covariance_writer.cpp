@@ -4,6 +4,8 @@
 #include <memory>
 #include <stdexcept>
 
+#include "solvers/incremental/isam2.h"
+#include "solvers/marginals/singular_information.h"
 #include "solvers/problem/pose_graph_problem.h"
 
 namespace loopd::tools {
@@ -16,6 +18,9 @@ void writeCovariances(const std::string& path, Backend& backend, const io::Datas
       keys.push_back(vertexKey(v));
       vertices.push_back(&v);
     }
+  if (const auto* isam = dynamic_cast<const Isam2Backend*>(&backend))
+    for (Key k : keys)
+      if (!isam->marginalDetermined(k)) throw std::runtime_error(kSingularInformationMessage);
   const std::vector<Eigen::MatrixXd> cov = backend.marginals(keys);
 
   std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);

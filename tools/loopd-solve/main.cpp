@@ -10,6 +10,7 @@
 #include "robust/backend_registry.h"
 #include "robust/mh_backend.h"
 #include "solvers/core/allocator_tuning.h"
+#include "solvers/init/initialization.h"
 #include "solvers/io/dataset_reader.h"
 #include "solvers/io/estimate_writer.h"
 #include "solvers/problem/pose_graph_problem.h"
@@ -66,6 +67,11 @@ int run(const tools::SolveOptions& opt) {
     online = tools::runOnline(*backend, problem, opt.quiet);
   } else {
     BackendUpdate all = wholeProblemUpdate(problem);
+    // isam2 at once starts where the batch solvers start. The robust incremental variants keep
+    // the file's values: a start from every factor would be bent by wrong closures, and one
+    // from the trusted factors alone (tried) leaves their kernels to reject true closures.
+    if (opt.solver == "isam2" && opt.linearInit)
+      all.initial = initializeLinear(problem.graph, problem.initial, problem.firstPose);
     if (!backend->handlesAmbiguous()) flattenAmbiguous(all);
     backend->update(all);
     // An incremental variant's update() takes the steps one update takes online; the whole
