@@ -15,12 +15,20 @@
 // here reaches the solver wrapped and marked trusted (role Odometry, as switch priors are), so
 // the solver's own robust scheme leaves it alone. graph() gives the factors as sent, so chi2()
 // stays Σ rᵀr of the input; decisions()/rejected() merge the solver's with this layer's.
+//
+// Under a batch solver (lm, gn, dogleg, gnc-*: each solve judges its steps by the cost it
+// evaluates), a kernel request is given as a HeldKernelFactor: its weight is held through
+// each solve and refreshed at the solution until the weights settle (IRLS; see
+// held_kernel_factor.h). With the weight re-evaluated at every trial point instead, the
+// closures of a redescending kernel that start far from agreement (a batch of poses placed
+// by odometry) are never pulled in.
 #include <memory>
 #include <optional>
 #include <string>
 #include <unordered_map>
 
 #include "robust/decorator_backend.h"
+#include "robust/held_kernel_factor.h"
 #include "robust/robust_wrapping.h"
 
 namespace loopd {
@@ -31,6 +39,8 @@ class PerFactorRobustBackend : public DecoratorBackend {
 
   std::string name() const override { return inner_->name(); }
   UpdateResult update(const BackendUpdate& update) override;
+  /// The solver's optimize(), then held kernel weights settled (batch solvers).
+  void optimize() override;
   const FactorGraph& graph() const override;
   std::vector<std::pair<FactorId, double>> decisions() const override;
   std::vector<FactorId> rejected() const override;
@@ -51,12 +61,27 @@ class PerFactorRobustBackend : public DecoratorBackend {
   static constexpr std::uint64_t kSwitchIndexBase = std::uint64_t{1} << 39;
   static constexpr FactorId kPriorIdBit = FactorId{1} << 62;
   static constexpr double kRejectBelow = 0.5;
+  /// Held kernel weights are settled when no refresh changes one by more than this, or after
+  /// this many re-solves (each a warm-started batch solve).
+  static constexpr double kWeightTolerance = 1e-4;
+  static constexpr int kMaxWeightRounds = 50;
 
  private:
   struct Handled {
     FactorPtr sent;   // as the sender sent it
     FactorPtr given;  // what the solver got: a wrapper, or for "none" a clone, marked trusted
+    std::shared_ptr<HeldKernelFactor> held;  // given, when its weight is held (batch solvers)
   };
+  /// The weight of a handled factor at x (a held kernel's at x, not the one it holds).
+  static double weightOf(const Handled& h, const Values& x);
+  /// Refreshes every held weight at the estimate and re-solves until none changes by more
+  /// than kWeightTolerance (or kMaxWeightRounds re-solves ran).
+  void settleHeldWeights();
+  /// Variables of the estimate that are new or moved beyond BackendOptions' moveThreshold
+  /// since before.
+  std::vector<Key> movedSince(const Values& before) const;
+
+  const bool holdKernels_;  // the solver re-solves the whole graph with step acceptance
   std::unordered_map<FactorId, Handled> handled_;
   std::unordered_map<FactorId, Key> switches_;  // id → switch key (sc requests)
   std::uint64_t nextSwitch_ = 0;

@@ -4,13 +4,21 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <memory>
 #include <set>
+#include <stdexcept>
 #include <string>
 
 #include "robust/backend_registry.h"
+#include "robust/held_kernel_factor.h"
 #include "robust/per_factor_backend.h"
+#include "solvers/factors/between_factor_se2.h"
 #include "solvers/io/dataset_reader.h"
+#include "solvers/problem/incremental_schedule.h"
+#include "solvers/problem/initial_guess.h"
 #include "solvers/problem/pose_graph_problem.h"
+#include "tests/robust/dataset_prefix.h"
 #include "tools/loopd-outliers/outlier_generator.h"
 #include "tools/loopd-solve/online_run.h"
 
@@ -145,6 +153,148 @@ TEST(PerFactorRobust, RemovingAHandledFactorForgetsItsDecision) {
   for (const auto& [id, w] : b->decisions()) EXPECT_NE(id, gone);
   EXPECT_FALSE(rejectedSet(*b).count(gone));
   EXPECT_EQ(b->graph().size(), d.problem.graph.size() - 1);
+}
+
+// Per-factor kernels under the batch solvers, fed as the server is fed by a front-end that
+// sends many poses at once: each batch carries whole steps of the incremental schedule until
+// it holds at least edgesPerBatch factors, its new poses placed by odometry from the
+// estimate. Checks that each update's moved list names every variable that moved.
+struct BatchFeed {
+  int updates = 0;
+  bool movedReported = true;  // every variable that moved was in its update's moved list
+};
+
+BatchFeed feedInBatches(Backend& b, const PoseGraphProblem& p, int edgesPerBatch) {
+  BatchFeed feed;
+  BackendUpdate u;
+  auto send = [&] {
+    if (!predictMissingValues(u.factors, b.estimate(), u.initial))
+      throw std::runtime_error("batch not reachable by odometry");
+    const Values before = b.estimate();
+    const std::vector<Key> moved = b.update(u).moved;
+    const std::set<Key> reported(moved.begin(), moved.end());
+    const Values& x = b.estimate();
+    for (int s = 0; s < x.size(); ++s) {
+      const int old = before.slot(x.key(s));
+      bool m = old < 0;
+      for (int i = 0; !m && i < kValueStride; ++i)
+        m = std::abs(x.data(s)[i] - before.data(old)[i]) > 1e-4;
+      if (m && !reported.count(x.key(s))) feed.movedReported = false;
+    }
+    ++feed.updates;
+    u = BackendUpdate();
+  };
+  const std::vector<IncrementalStep> steps = incrementalSchedule(p);
+  for (size_t i = 0; i < steps.size(); ++i) {
+    if (i == 0) u.initial.insertFrom(p.initial, p.initial.slot(steps[i].pose));
+    for (int f : steps[i].factors) u.factors.push_back(p.graph[f]);
+    if (static_cast<int>(u.factors.size()) >= edgesPerBatch) send();
+  }
+  if (!u.factors.empty()) send();
+  return feed;
+}
+
+// intel's first 300 poses, optionally with wrong closures; every closure asks for `kernel`.
+struct Intel300 {
+  PoseGraphProblem problem;
+  std::set<FactorId> outliers;
+  int closures = 0;
+  double optimum = 0.0;  // chi2 of the outlier-free optimum (0.827)
+};
+
+Intel300 intel300(const std::string& kernel, const tools::OutlierOptions* wrong = nullptr) {
+  const io::Dataset clean = test::loadPrefix("intel.g2o:300");
+  Intel300 d;
+  auto lm = makeBackend("lm");
+  lm->update(wholeProblemUpdate(buildProblem(clean)));
+  d.optimum = lm->chi2();
+  if (wrong) {
+    const tools::OutlierResult r = tools::addOutliers(clean, *wrong);
+    d.problem = buildProblem(r.graph);
+    d.outliers.insert(r.outliers.begin(), r.outliers.end());
+  } else {
+    d.problem = buildProblem(clean);
+  }
+  for (const auto& f : d.problem.graph.factors())
+    if (isUncertain(f->role())) {
+      std::const_pointer_cast<Factor>(f)->setRobustRequest({kernel, 0.0});
+      ++d.closures;
+    }
+  return d;
+}
+
+// The server's solver set-up: no linear initialization, new poses from odometry.
+std::unique_ptr<PerFactorRobustBackend> serverSolver(const std::string& name) {
+  BackendOptions o;
+  o.linearInitialization = false;
+  return std::make_unique<PerFactorRobustBackend>(makeBackend(name, o));
+}
+
+TEST(HeldKernelFactor, WeighsByTheHeldWeightUntilRefreshed) {
+  auto inner = std::make_shared<BetweenFactorSE2>(poseKey(0), poseKey(1), SE2(1, 0, 0),
+                                                  Eigen::Matrix3d::Identity());
+  const auto held = HeldKernelFactor::make(inner, KernelType::DCS);
+  Values x;
+  x.insert(poseKey(0), SE2(0, 0, 0));
+  x.insert(poseKey(1), SE2(4, 0, 0));  // χ² = 9: DCS weight (2/10)² = 0.04
+  EXPECT_EQ(held->heldWeight(), 1.0);
+  EXPECT_DOUBLE_EQ(held->chi2(x), 9.0);
+  EXPECT_NEAR(held->holdWeightAt(x), 0.96, 1e-12);
+  EXPECT_NEAR(held->chi2(x), 0.04 * 9.0, 1e-12);
+  // Moved nearer, it keeps its weight (a batch solver's steps are judged by a fixed weighted
+  // least-squares cost) while weightAt follows the point.
+  x.set(x.slot(poseKey(1)), SE2(2, 0, 0));  // χ² = 1: DCS weight 1
+  EXPECT_NEAR(held->chi2(x), 0.04, 1e-12);
+  EXPECT_EQ(held->weightAt(x), 1.0);
+  EXPECT_NEAR(held->holdWeightAt(x), 0.96, 1e-12);
+  EXPECT_DOUBLE_EQ(held->chi2(x), 1.0);
+}
+
+// At the odometry's prediction intel's 25 closures (poses 17–45 to 270–299, all in the second
+// 200-edge batch) sit at χ² 42–61, DCS weight ≈ 0.0015. Weighed at every trial point, each
+// closure's w·χ² falls as it is pulled apart, so lm, gn and dogleg refused every step that
+// brought them in and stopped at χ² 1261.67, all 25 rejected; isam2 (steps taken at the
+// linearization point's weights) is exact.
+TEST(PerFactorRobust, BatchSolversFedLargeBatchesReachTheOptimumWithKernelRequests) {
+  const Intel300 d = intel300("dcs");
+  ASSERT_EQ(d.closures, 25);
+  ASSERT_NEAR(d.optimum, 0.827, 1e-3);
+  for (const char* solver : {"lm", "gn", "dogleg", "gnc-tls", "isam2"}) {
+    SCOPED_TRACE(solver);
+    const auto b = serverSolver(solver);
+    const BatchFeed feed = feedInBatches(*b, d.problem, 200);
+    EXPECT_EQ(feed.updates, 2);
+    EXPECT_TRUE(feed.movedReported);
+    // The batch solvers settle their held weights within each update.
+    if (std::string(solver) != "isam2") EXPECT_LT(b->chi2(), 1.0001 * d.optimum);
+    b->optimize();
+    EXPECT_LT(b->chi2(), 1.0001 * d.optimum);
+    EXPECT_TRUE(b->rejected().empty());
+    int accepted = 0;
+    for (const auto& [id, w] : b->decisions()) accepted += w >= 0.99;
+    EXPECT_EQ(accepted, d.closures);
+  }
+}
+
+TEST(PerFactorRobust, BatchSolversFedLargeBatchesStillRejectWrongClosures) {
+  for (tools::OutlierMode mode : {tools::OutlierMode::Random, tools::OutlierMode::Group}) {
+    tools::OutlierOptions o;
+    o.count = 10;
+    o.mode = mode;
+    o.groupSize = 5;
+    o.seed = 2;
+    const Intel300 d = intel300("dcs", &o);
+    for (const char* solver : {"lm", "gn", "dogleg"}) {
+      SCOPED_TRACE(std::string(solver) + " " + tools::outlierModeName(mode));
+      const auto b = serverSolver(solver);
+      feedInBatches(*b, d.problem, 200);
+      EXPECT_EQ(rejectedSet(*b), d.outliers);
+      double inliers = 0.0;
+      for (const auto& f : d.problem.graph.factors())
+        if (!d.outliers.count(f->id())) inliers += f->chi2(b->estimate());
+      EXPECT_LT(inliers, 1.001 * d.optimum);
+    }
+  }
 }
 
 }  // namespace

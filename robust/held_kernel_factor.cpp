@@ -1,0 +1,72 @@
+#include "robust/held_kernel_factor.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace loopd {
+
+template <size_t... I>
+HeldKernelFactor::HeldKernelFactor(std::index_sequence<I...>, FactorPtr inner, KernelType kernel,
+                                   double parameter)
+    : Factor({{inner->key(I), inner->varType(I)}...}, inner->dim(), inner->role()),
+      inner_(std::move(inner)),
+      kernel_(kernel),
+      parameter_(parameter) {
+  setId(inner_->id());
+}
+
+std::shared_ptr<HeldKernelFactor> HeldKernelFactor::make(FactorPtr inner, KernelType kernel,
+                                                         double parameter) {
+  if (!inner) throw std::invalid_argument("HeldKernelFactor: null inner factor");
+  if (parameter <= 0.0) parameter = defaultKernelParameter(kernel, inner->dim());
+  switch (inner->size()) {
+    case 1:
+      return std::make_shared<HeldKernelFactor>(std::make_index_sequence<1>{}, inner, kernel,
+                                                parameter);
+    case 2:
+      return std::make_shared<HeldKernelFactor>(std::make_index_sequence<2>{}, inner, kernel,
+                                                parameter);
+    case 3:
+      return std::make_shared<HeldKernelFactor>(std::make_index_sequence<3>{}, inner, kernel,
+                                                parameter);
+    case 4:
+      return std::make_shared<HeldKernelFactor>(std::make_index_sequence<4>{}, inner, kernel,
+                                                parameter);
+    default:
+      throw std::invalid_argument(std::string("HeldKernelFactor: unsupported key count for ") +
+                                  inner->typeName());
+  }
+}
+
+void HeldKernelFactor::evaluate(const double* const* x, double* r, double* const* J) const {
+  inner_->evaluate(x, r, J);
+  if (weight_ == 1.0) return;
+  const double s = std::sqrt(weight_);
+  const int d = dim();
+  for (int k = 0; k < d; ++k) r[k] *= s;
+  if (J == nullptr) return;
+  for (int i = 0; i < size(); ++i)
+    if (J[i] != nullptr)
+      for (int k = 0; k < d * varDim(varType(i)); ++k) J[i][k] *= s;
+}
+
+std::unique_ptr<Factor> HeldKernelFactor::clone() const {
+  auto c = std::make_unique<HeldKernelFactor>(*this);
+  c->inner_ = inner_->clone();
+  return c;
+}
+
+double HeldKernelFactor::weightAt(const Values& values) const {
+  return kernelWeight(kernel_, inner_->chi2(values), parameter_);
+}
+
+double HeldKernelFactor::holdWeightAt(const Values& values) {
+  const double w = weightAt(values);
+  const double change = std::abs(w - weight_);
+  weight_ = w;
+  return change;
+}
+
+}  // namespace loopd
