@@ -1,5 +1,7 @@
 #include "robust/held_kernel_factor.h"
 
+#include "robust/make_wrapper.h"
+
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -21,23 +23,7 @@ std::shared_ptr<HeldKernelFactor> HeldKernelFactor::make(FactorPtr inner, Kernel
                                                          double parameter) {
   if (!inner) throw std::invalid_argument("HeldKernelFactor: null inner factor");
   if (parameter <= 0.0) parameter = defaultKernelParameter(kernel, inner->dim());
-  switch (inner->size()) {
-    case 1:
-      return std::make_shared<HeldKernelFactor>(std::make_index_sequence<1>{}, inner, kernel,
-                                                parameter);
-    case 2:
-      return std::make_shared<HeldKernelFactor>(std::make_index_sequence<2>{}, inner, kernel,
-                                                parameter);
-    case 3:
-      return std::make_shared<HeldKernelFactor>(std::make_index_sequence<3>{}, inner, kernel,
-                                                parameter);
-    case 4:
-      return std::make_shared<HeldKernelFactor>(std::make_index_sequence<4>{}, inner, kernel,
-                                                parameter);
-    default:
-      throw std::invalid_argument(std::string("HeldKernelFactor: unsupported key count for ") +
-                                  inner->typeName());
-  }
+  return makeWrapper<HeldKernelFactor>(inner, 4, kernel, parameter);
 }
 
 void HeldKernelFactor::evaluate(const double* const* x, double* r, double* const* J) const {

@@ -1,5 +1,7 @@
 #include "robust/robust_factors.h"
 
+#include "robust/make_wrapper.h"
+
 #include <array>
 #include <cmath>
 #include <stdexcept>
@@ -37,28 +39,6 @@ void scaleBlocks(const Factor& f, int numKeys, double s, double* r, double* cons
 }
 
 double chi2At(const Factor& inner, const Values& values) { return inner.chi2(values); }
-
-// Builds a wrapper of class W over inner with its key count chosen at run time.
-template <class W, class... Args>
-std::shared_ptr<W> makeWrapper(const FactorPtr& inner, int maxKeys, Args&&... args) {
-  if (!inner) throw std::invalid_argument("robust wrapper: null inner factor");
-  switch (inner->size()) {
-    case 1:
-      return std::make_shared<W>(std::make_index_sequence<1>{}, inner, args...);
-    case 2:
-      return std::make_shared<W>(std::make_index_sequence<2>{}, inner, args...);
-    case 3:
-      if (maxKeys >= 3) return std::make_shared<W>(std::make_index_sequence<3>{}, inner, args...);
-      break;
-    case 4:
-      if (maxKeys >= 4) return std::make_shared<W>(std::make_index_sequence<4>{}, inner, args...);
-      break;
-    default:
-      break;
-  }
-  throw std::invalid_argument(std::string("robust wrapper: unsupported key count for ") +
-                              inner->typeName());
-}
 
 }  // namespace
 

@@ -7,6 +7,7 @@
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
 #include "solvers/factors/landmark_factors.h"
+#include "solvers/init/breadth_first.h"
 #include "solvers/init/landmark_headings.h"
 #include "solvers/init/sparse_normal_solve.h"
 
@@ -78,22 +79,11 @@ LinearUnknowns numberConnected(const FactorGraph& graph, const Values& values, i
   }
   LinearUnknowns u;
   u.index.assign(values.size(), -1);
-  std::vector<char> seen(values.size(), 0);
-  std::deque<int> queue{anchorSlot};
-  seen[anchorSlot] = 1;
-  while (!queue.empty()) {
-    const int s = queue.front();
-    queue.pop_front();
+  for (int s : breadthFirstOrder(adj, anchorSlot))
     if (s != anchorSlot) {
       u.index[s] = u.count;
       u.count += dim;
     }
-    for (int t : adj[s])
-      if (!seen[t]) {
-        seen[t] = 1;
-        queue.push_back(t);
-      }
-  }
   return u;
 }
 

@@ -1,11 +1,11 @@
 #include "solvers/init/landmark_headings.h"
 
 #include <cmath>
-#include <deque>
 #include <stdexcept>
 
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/landmark_factors.h"
+#include "solvers/init/breadth_first.h"
 #include "solvers/init/sparse_normal_solve.h"
 
 namespace loopd {
@@ -45,22 +45,11 @@ Unknowns numberReachable(const FactorGraph& graph, const Values& values, int anc
   }
   Unknowns u;
   u.index.assign(values.size(), -1);
-  std::vector<char> seen(values.size(), 0);
-  std::deque<int> queue{anchorSlot};
-  seen[anchorSlot] = 1;
-  while (!queue.empty()) {
-    const int s = queue.front();
-    queue.pop_front();
+  for (int s : breadthFirstOrder(adj, anchorSlot))
     if (s != anchorSlot) {
       u.index[s] = u.count;
       u.count += values.type(s) == VarType::SE2 ? kPoseDim : kPointDim;
     }
-    for (int t : adj[s])
-      if (!seen[t]) {
-        seen[t] = 1;
-        queue.push_back(t);
-      }
-  }
   return u;
 }
 

@@ -1,0 +1,35 @@
+#pragma once
+// A wrapper factor (robust kernel, switch, mixture, held kernel) takes its inner factor's keys
+// at compile time; this picks the key count at run time.
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+#include "solvers/factors/factor.h"
+
+namespace loopd {
+
+// Builds a wrapper of class W over inner with its key count chosen at run time.
+template <class W, class... Args>
+std::shared_ptr<W> makeWrapper(const FactorPtr& inner, int maxKeys, Args&&... args) {
+  if (!inner) throw std::invalid_argument("robust wrapper: null inner factor");
+  switch (inner->size()) {
+    case 1:
+      return std::make_shared<W>(std::make_index_sequence<1>{}, inner, args...);
+    case 2:
+      return std::make_shared<W>(std::make_index_sequence<2>{}, inner, args...);
+    case 3:
+      if (maxKeys >= 3) return std::make_shared<W>(std::make_index_sequence<3>{}, inner, args...);
+      break;
+    case 4:
+      if (maxKeys >= 4) return std::make_shared<W>(std::make_index_sequence<4>{}, inner, args...);
+      break;
+    default:
+      break;
+  }
+  throw std::invalid_argument(std::string("robust wrapper: unsupported key count for ") +
+                              inner->typeName());
+}
+
+}  // namespace loopd
