@@ -1,11 +1,10 @@
 #include "robust/held_kernel_factor.h"
 
-#include "robust/make_wrapper.h"
-
 #include <cmath>
 #include <stdexcept>
-#include <string>
 #include <utility>
+
+#include "robust/wrapper_support.h"
 
 namespace loopd {
 
@@ -28,14 +27,7 @@ std::shared_ptr<HeldKernelFactor> HeldKernelFactor::make(FactorPtr inner, Kernel
 
 void HeldKernelFactor::evaluate(const double* const* x, double* r, double* const* J) const {
   inner_->evaluate(x, r, J);
-  if (weight_ == 1.0) return;
-  const double s = std::sqrt(weight_);
-  const int d = dim();
-  for (int k = 0; k < d; ++k) r[k] *= s;
-  if (J == nullptr) return;
-  for (int i = 0; i < size(); ++i)
-    if (J[i] != nullptr)
-      for (int k = 0; k < d * varDim(varType(i)); ++k) J[i][k] *= s;
+  if (weight_ != 1.0) scaleBlocks(*this, size(), std::sqrt(weight_), r, J);
 }
 
 std::unique_ptr<Factor> HeldKernelFactor::clone() const {

@@ -1,9 +1,10 @@
 #include "robust/per_factor_backend.h"
 
-#include <cmath>
+#include <algorithm>
 #include <stdexcept>
 #include <unordered_set>
 
+#include "solvers/backend/moved_keys.h"
 #include "solvers/batch/batch_backend.h"
 
 namespace loopd {
@@ -105,7 +106,7 @@ UpdateResult PerFactorRobustBackend::update(const BackendUpdate& u) {
   asSentStale_ = true;
   if (holdKernels_) {
     settleHeldWeights();
-    result.moved = movedSince(before);
+    result.moved = movedKeys(before, inner_->estimate(), BackendOptions{}.moveThreshold);
   }
   return result;
 }
@@ -124,20 +125,6 @@ void PerFactorRobustBackend::settleHeldWeights() {
     if (change <= kWeightTolerance || round == kMaxWeightRounds) return;
     inner_->optimize();
   }
-}
-
-std::vector<Key> PerFactorRobustBackend::movedSince(const Values& before) const {
-  const double threshold = BackendOptions{}.moveThreshold;
-  const Values& x = inner_->estimate();
-  std::vector<Key> moved;
-  for (int s = 0; s < x.size(); ++s) {
-    const int old = before.slot(x.key(s));
-    bool m = old < 0;
-    for (int i = 0; !m && i < kValueStride; ++i)
-      m = std::abs(x.data(s)[i] - before.data(old)[i]) > threshold;
-    if (m) moved.push_back(x.key(s));
-  }
-  return moved;
 }
 
 const FactorGraph& PerFactorRobustBackend::graph() const {

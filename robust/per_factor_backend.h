@@ -77,9 +77,6 @@ class PerFactorRobustBackend : public DecoratorBackend {
   /// Refreshes every held weight at the estimate and re-solves until none changes by more
   /// than kWeightTolerance (or kMaxWeightRounds re-solves ran).
   void settleHeldWeights();
-  /// Variables of the estimate that are new or moved beyond BackendOptions' moveThreshold
-  /// since before.
-  std::vector<Key> movedSince(const Values& before) const;
 
   const bool holdKernels_;  // the solver re-solves the whole graph with step acceptance
   std::unordered_map<FactorId, Handled> handled_;

@@ -1,12 +1,12 @@
 #include "robust/robust_factors.h"
 
-#include "robust/make_wrapper.h"
-
 #include <array>
 #include <cmath>
 #include <stdexcept>
 #include <utility>
 #include <vector>
+
+#include "robust/wrapper_support.h"
 
 namespace loopd {
 
@@ -26,17 +26,6 @@ double gammaP(double a, double x) {
 }
 
 int effectiveDim(const Factor& f) { return f.dim(); }
-
-void scaleBlocks(const Factor& f, int numKeys, double s, double* r, double* const* J) {
-  const int d = f.dim();
-  for (int k = 0; k < d; ++k) r[k] *= s;
-  if (J == nullptr) return;
-  for (int i = 0; i < numKeys; ++i)
-    if (J[i] != nullptr) {
-      const int n = d * varDim(f.varType(i));
-      for (int k = 0; k < n; ++k) J[i][k] *= s;
-    }
-}
 
 double chi2At(const Factor& inner, const Values& values) { return inner.chi2(values); }
 

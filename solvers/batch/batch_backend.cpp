@@ -3,6 +3,7 @@
 #include <chrono>
 #include <stdexcept>
 
+#include "solvers/backend/moved_keys.h"
 #include "solvers/backend/update_validation.h"
 #include "solvers/init/initialization.h"
 #include "solvers/marginals/batch_marginals.h"
@@ -37,13 +38,7 @@ UpdateResult BatchBackend::update(const BackendUpdate& u) {
   optimize();
 
   UpdateResult result;
-  for (int s = 0; s < estimate_.size(); ++s) {
-    const int old = before.slot(estimate_.key(s));
-    bool moved = old < 0;
-    for (int i = 0; !moved && i < kValueStride; ++i)
-      moved = std::abs(estimate_.data(s)[i] - before.data(old)[i]) > options_.moveThreshold;
-    if (moved) result.moved.push_back(estimate_.key(s));
-  }
+  result.moved = movedKeys(before, estimate_, options_.moveThreshold);
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return result;
 }

@@ -1,6 +1,7 @@
 #pragma once
-// A wrapper factor (robust kernel, switch, mixture, held kernel) takes its inner factor's keys
-// at compile time; this picks the key count at run time.
+// What the wrapper factors (robust kernel, switch, mixture, held kernel) share: makeWrapper
+// picks the inner factor's key count (a compile-time parameter) at run time; scaleBlocks
+// weighs the inner residual and Jacobians.
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -31,5 +32,8 @@ std::shared_ptr<W> makeWrapper(const FactorPtr& inner, int maxKeys, Args&&... ar
   throw std::invalid_argument(std::string("robust wrapper: unsupported key count for ") +
                               inner->typeName());
 }
+
+/// Scales the residual r (f.dim()) and the Jacobian blocks J[0 … numKeys) (null: skipped) by s.
+void scaleBlocks(const Factor& f, int numKeys, double s, double* r, double* const* J);
 
 }  // namespace loopd
