@@ -141,14 +141,15 @@ int run(const Options& o) {
     else
       dueGroups[static_cast<size_t>(at)].push_back(&g);
   }
-  for (const auto& e : ds.edges) {
-    if (inGroup[static_cast<size_t>(e.index)]) continue;
+  auto schedule = [&](std::vector<std::vector<const io::Edge*>>& into, const io::Edge& e) {
     const long at = feed.dueAt(e);
     if (at < 0)
       ++skipped;
     else
-      due[static_cast<size_t>(at)].push_back(&e);
-  }
+      into[static_cast<size_t>(at)].push_back(&e);
+  };
+  for (const auto& e : ds.edges)
+    if (!inGroup[static_cast<size_t>(e.index)]) schedule(due, e);
   // TORO EQUIV pairs, numbered after the edges as loopd-solve numbers them.
   std::vector<io::Edge> equivalences;
   std::vector<std::vector<const io::Edge*>> dueEquivalences(n);
@@ -156,11 +157,7 @@ int run(const Options& o) {
   for (const auto& [a, b] : ds.equivalences) {
     equivalences.push_back(
         io::equivalenceEdge(a, b, static_cast<int>(ds.edges.size() + equivalences.size())));
-    const long at = feed.dueAt(equivalences.back());
-    if (at < 0)
-      ++skipped;
-    else
-      dueEquivalences[static_cast<size_t>(at)].push_back(&equivalences.back());
+    schedule(dueEquivalences, equivalences.back());
   }
 
   // Where batches go.
