@@ -66,6 +66,18 @@ Values GncBackend::trustedLinearStart(const std::vector<char>& alsoUse) const {
   return initializeLinearFromLowestPose(trusted, estimate_);
 }
 
+bool GncBackend::someVariableUntrusted() const {
+  std::vector<char> touched(static_cast<std::size_t>(estimate_.size()), 0);
+  for (int i = 0; i < graph_.size(); ++i) {
+    if (isUncertain(graph_[i]->role())) continue;
+    for (int k = 0; k < graph_[i]->size(); ++k) {
+      const int slot = estimate_.slot(graph_[i]->key(k));
+      if (slot >= 0) touched[static_cast<std::size_t>(slot)] = 1;
+    }
+  }
+  return std::find(touched.begin(), touched.end(), 0) != touched.end();
+}
+
 void GncBackend::optimize() {
   if (graph_.empty()) return;
   // The odometry start: the trusted factors' linear initialization (recomputed on every run;
@@ -78,7 +90,11 @@ void GncBackend::optimize() {
     trustedInit_ = true;
     // Linear initialization from the trusted factors only; the base class must not redo it
     // with the outliers included.
-    const Values start = odometryStart.size() > 0 ? odometryStart : trustedLinearStart();
+    Values start = odometryStart.size() > 0 ? odometryStart : trustedLinearStart();
+    // A variable no trusted factor touches (a landmark seen only through sightings) would
+    // start where the file put it, at the end of dead-reckoned headings: the first pass, a
+    // least-squares solve with every factor, then starts from the batch solvers' start.
+    if (someVariableUntrusted()) start = initializeLinearFromLowestPose(graph_, estimate_);
     if (start.size() > 0) estimate_ = start;
     options_.linearInitialization = false;
   }

@@ -165,6 +165,8 @@ class GncBackend : public BatchBackend {
   /// The trusted factors' linear initialization from the lowest pose (the odometry start);
   /// empty without a pose or a trusted factor. alsoUse: per factor, uncertain ones to use too.
   Values trustedLinearStart(const std::vector<char>& alsoUse = {}) const;
+  /// Whether some variable is touched by no trusted factor (only by uncertain ones).
+  bool someVariableUntrusted() const;
   void updateWeights(const std::vector<double>& r2, const std::vector<double>& c2);
 
   GncOptions gnc_;
