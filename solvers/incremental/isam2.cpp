@@ -264,10 +264,13 @@ void Isam2Backend::optimize() {
   double previous = costWithGauge();
   int iterations = 0;
   bool converged = false, usedBatch = false, uphill = false;
+  // BackendOptions::maxIterations (loopd-solve --max-iterations) bounds the whole call: the
+  // full steps and the batch fallback's iterations together.
+  const int budget = std::max(options_.maxIterations, 1);
   for (int round = 0; round < 2 && !converged; ++round) {
-    converged = fullSteps(isam_.maxFinalIterations, isam_.finalRelativeTolerance, previous,
-                          iterations, &uphill);
-    if (converged || round == 1) break;
+    const int steps = std::min(isam_.maxFinalIterations, budget - iterations);
+    converged = fullSteps(steps, isam_.finalRelativeTolerance, previous, iterations, &uphill);
+    if (converged || round == 1 || iterations >= budget) break;
     // Gauss–Newton went uphill: Levenberg–Marquardt on the whole graph, then rebuild.
     usedBatch = true;
     FactorGraph all = graph_;
@@ -276,7 +279,7 @@ void Isam2Backend::optimize() {
     for (int v = 0; v < estimate_.size(); ++v) fixed[v] = varFactors_[v].empty() ? 1 : 0;
     OptimizerOptions o;
     o.method = OptimizerMethod::LevenbergMarquardt;
-    o.maxIterations = std::max(options_.maxIterations, 100);
+    o.maxIterations = budget - iterations;
     NonlinearOptimizer lm(all, estimate_, fixed, o);
     const OptimizerResult r = lm.optimize(estimate_);
     iterations += r.iterations;

@@ -502,6 +502,32 @@ TEST(Isam2, SaysWhichMarginalsAPartNotTiedToTheFirstPoseLeavesUndetermined) {
   EXPECT_NEAR(c1(2, 2), 1.0, 1e-6);
 }
 
+// BackendOptions::maxIterations (loopd-solve --max-iterations) bounds optimize(): its full
+// steps and the batch Levenberg-Marquardt it falls back on when a step goes uphill. MIT from
+// the file's start takes that fallback (30 iterations in all); before, optimize() took up to
+// 30 full steps and at least 100 fallback iterations whatever was asked.
+TEST(Isam2, OptimizeTakesAtMostTheIterationsAsked) {
+  const PoseGraphProblem p = load("MIT.g2o");
+  auto solveWithLimit = [&](int limit) {
+    BackendOptions o;
+    o.maxIterations = limit;
+    auto isam = std::make_unique<Isam2Backend>(o);
+    isam->update(wholeProblemUpdate(p));
+    isam->optimize();
+    return isam;
+  };
+  const auto unlimited = solveWithLimit(100);
+  EXPECT_TRUE(unlimited->summary().converged) << unlimited->summary().stopReason;
+  EXPECT_GT(unlimited->summary().iterations, 12);
+  for (int limit : {1, 3, 12}) {
+    const auto capped = solveWithLimit(limit);
+    EXPECT_LE(capped->summary().iterations, limit);
+    EXPECT_GE(capped->summary().iterations, 1);
+    EXPECT_FALSE(capped->summary().converged) << limit;
+    EXPECT_GT(capped->chi2(), unlimited->chi2()) << limit;
+  }
+}
+
 TEST(Isam2, IsRegisteredAsIncremental) {
   bool found = false;
   for (const auto& info : availableBackends())
