@@ -25,6 +25,9 @@ class DecoratorBackend : public Backend {
     return inner_->marginals(keys);
   }
   SolveSummary summary() const override { return inner_->summary(); }
+  /// The backend the wrapped factors go to (for what only it can say: which marginals the
+  /// data determine).
+  const Backend& inner() const { return *inner_; }
 
  protected:
   /// Throws std::invalid_argument("WHO: null inner backend") if inner is null.

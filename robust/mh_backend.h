@@ -68,6 +68,8 @@ class MhBackend : public Backend {
   std::vector<std::pair<FactorId, double>> decisions() const override;
   std::vector<FactorId> rejected() const override;
   SolveSummary summary() const override { return best().tree->summary(); }
+  /// The best hypothesis's tree: the estimate, graph and marginals above are its.
+  const Isam2Backend& bestTree() const { return *best().tree; }
   bool handlesAmbiguous() const override { return true; }
   std::optional<int> chosenAlternative(FactorId id) const override;
 

@@ -4,11 +4,27 @@
 #include <memory>
 #include <stdexcept>
 
+#include "robust/decorator_backend.h"
+#include "robust/mh_backend.h"
 #include "solvers/incremental/isam2.h"
 #include "solvers/marginals/singular_information.h"
 #include "solvers/problem/pose_graph_problem.h"
 
 namespace loopd::tools {
+namespace {
+
+// isam2 itself, the one under the robust decorators, or mh's best hypothesis's: it knows which
+// of its cliques were damped (a part of the graph that nothing, or only rejected closures, ties
+// to the first pose).
+const Isam2Backend* isam2Within(const Backend& backend) {
+  const Backend* at = &backend;
+  if (const auto* mh = dynamic_cast<const MhBackend*>(at)) return &mh->bestTree();
+  while (const auto* decorator = dynamic_cast<const DecoratorBackend*>(at))
+    at = &decorator->inner();
+  return dynamic_cast<const Isam2Backend*>(at);
+}
+
+}  // namespace
 
 void writeCovariances(const std::string& path, Backend& backend, const io::Dataset& dataset) {
   std::vector<Key> keys;
@@ -18,7 +34,7 @@ void writeCovariances(const std::string& path, Backend& backend, const io::Datas
       keys.push_back(vertexKey(v));
       vertices.push_back(&v);
     }
-  if (const auto* isam = dynamic_cast<const Isam2Backend*>(&backend))
+  if (const Isam2Backend* isam = isam2Within(backend))
     for (Key k : keys)
       if (!isam->marginalDetermined(k)) throw std::runtime_error(kSingularInformationMessage);
   const std::vector<Eigen::MatrixXd> cov = backend.marginals(keys);
