@@ -83,6 +83,7 @@ void GncBackend::optimize() {
   // The odometry start: the trusted factors' linear initialization (recomputed on every run;
   // empty if there is none), one of the GNC's starting points.
   Values odometryStart;
+  bool batchStartCandidate = false;  // the first solve started from the trusted factors
   const bool wantOdometryStart = gnc_.odometryStart && gnc_.trustedInitialization &&
                                  (firstSolve_ ? options_.linearInitialization : trustedInit_);
   if (wantOdometryStart) odometryStart = trustedLinearStart();
@@ -94,13 +95,16 @@ void GncBackend::optimize() {
     // A variable no trusted factor touches (a landmark seen only through sightings) would
     // start where the file put it, at the end of dead-reckoned headings: the first pass, a
     // least-squares solve with every factor, then starts from the batch solvers' start.
-    if (someVariableUntrusted()) start = initializeLinearFromLowestPose(graph_, estimate_);
+    if (someVariableUntrusted())
+      start = initializeLinearFromLowestPose(graph_, estimate_);
+    else
+      batchStartCandidate = gnc_.batchStartWhenNoneRejected && start.size() > 0;
     if (start.size() > 0) estimate_ = start;
     options_.linearInitialization = false;
   }
   firstSolve_ = false;
 
-  Run(*this, std::move(odometryStart)).execute();
+  Run(*this, std::move(odometryStart), batchStartCandidate).execute();
 }
 
 std::vector<std::pair<FactorId, double>> GncBackend::decisions() const {

@@ -6,10 +6,11 @@
 #include <limits>
 
 #include "robust/robust_factors.h"
+#include "solvers/init/initialization.h"
 
 namespace loopd {
 
-GncBackend::Run::Run(GncBackend& backend, Values odometryStart)
+GncBackend::Run::Run(GncBackend& backend, Values odometryStart, bool batchStartCandidate)
     : b_(backend),
       gnc_(backend.gnc_),
       graph_(backend.graph_),
@@ -22,6 +23,7 @@ GncBackend::Run::Run(GncBackend& backend, Values odometryStart)
       noiseAware_(backend.gnc_.tailExponent >= 0.0 && backend.options_.robustParameter <= 0.0),
       odometryCandidate_(odometryStart_.size() == backend.estimate_.size() &&
                          odometryStart_.size() > 0),
+      batchStartCandidate_(batchStartCandidate),
       refineCap_(backend.gnc_.refineIterations),
       fullIterations_(backend.optimizer().options().maxIterations),
       defaultLambda_(backend.optimizer().options().initialLambda),
@@ -58,6 +60,7 @@ void GncBackend::Run::execute() {
     solveWeighted(0);
   runChecks(0);
   regateAtEnd();
+  if (batchStartCandidate_ && rejectedCount() == 0) tryBatchStart();
   reason_ = firstReason + log_;
   report();
 }
@@ -100,14 +103,17 @@ void GncBackend::Run::solveWeighted(int cap) {
 // One GNC with thresholds c2: from start_ (first: the current estimate) the plain
 // least-squares solve, then the μ steps; or (fromOdometry) the μ steps straight from the
 // odometry start, μ₀ set by the residuals there.
-void GncBackend::Run::gncPass(bool first, bool fromOdometry) {
+void GncBackend::Run::gncPass(bool first, bool fromOdometry, const Values* from) {
   double& mu = b_.mu_;
   int& outer = b_.outer_;
   weights_.assign(n_, 1.0);
   if (fromOdometry) {
     estimate_.assignFrom(odometryStart_);
   } else {
-    if (!first) estimate_.assignFrom(start_);
+    if (from)
+      estimate_.assignFrom(*from);
+    else if (!first)
+      estimate_.assignFrom(start_);
     // Plain least squares (all weights 1); capped when the GNC follows (it only starts it).
     solveCapped(anyUncertain_ ? gnc_.stepIterations : 0, Solve::LeastSquares);
     iterations_ += b_.summary_.iterations;
@@ -277,6 +283,29 @@ void GncBackend::Run::judgeCandidates() {
   const bool tightened = gated_ && belowDefaults(gate_);
   if ((rounds > 0 || tightened) && gnc_.readmit)
     readmitAtTail(rounds > 0 ? firstGate : std::numeric_limits<double>::infinity());
+}
+
+// Nothing rejected: the answer is a least-squares solution in the basin of the trusted
+// start, which odometry alone can put far off (MIT: 770.66). The batch solvers' start, built
+// with every closure (none of them an outlier by this answer), is then the better start for
+// that least squares; its GNC, solved to convergence, is kept if cheaper at the gate.
+void GncBackend::Run::tryBatchStart() {
+  const Values batchStart = initializeLinearFromLowestPose(graph_, start_);
+  if (batchStart.size() != estimate_.size()) return;
+  bestName_.clear();
+  costs_.clear();
+  consider("kept");
+  const int outer = b_.outer_;
+  gncPass(false, false, &batchStart);
+  b_.outer_ += outer;
+  if (gated_)
+    refine(0);
+  else
+    solveWeighted(0);
+  consider("from the batch start");
+  restore(best_);
+  log_ += "; nothing rejected, GNC from the batch solvers' start: kept " + bestName_ +
+          " (truncated costs " + costs_ + ")";
 }
 
 void GncBackend::Run::report() {

@@ -16,8 +16,10 @@ namespace loopd {
 
 class GncBackend::Run {
  public:
-  /// odometryStart: the trusted factors' linear initialization (empty if none).
-  Run(GncBackend& backend, Values odometryStart);
+  /// odometryStart: the trusted factors' linear initialization (empty if none);
+  /// batchStartCandidate: the first pass starts from it, and the batch solvers' start is a
+  /// candidate if nothing is rejected (GncOptions::batchStartWhenNoneRejected).
+  Run(GncBackend& backend, Values odometryStart, bool batchStartCandidate);
   void execute();
 
  private:
@@ -34,7 +36,9 @@ class GncBackend::Run {
   void residuals();
   void solveCapped(int cap, Solve kind);
   void solveWeighted(int cap);
-  void gncPass(bool first, bool fromOdometry = false);
+  /// from: the start of the least-squares solve (default: start_, or the current estimate
+  /// for the first pass).
+  void gncPass(bool first, bool fromOdometry = false, const Values* from = nullptr);
   void refine(int cap);
   double tlsCost() const;
   Candidate snapshot() const;
@@ -43,6 +47,7 @@ class GncBackend::Run {
   bool belowDefaults(const std::vector<double>& thresholds) const;
   void consider(const std::string& name);
   void judgeCandidates();
+  void tryBatchStart();
   void report();
 
   // The gate (gnc_gate.cpp).
@@ -71,7 +76,7 @@ class GncBackend::Run {
   const int n_;
   const Values start_;  // the estimate the first pass started from
   const Values odometryStart_;
-  const bool tls_, noiseAware_, odometryCandidate_;
+  const bool tls_, noiseAware_, odometryCandidate_, batchStartCandidate_;
   const int refineCap_;
   // The optimizer's own limits, restored after each capped solve.
   const int fullIterations_;

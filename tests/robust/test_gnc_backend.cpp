@@ -1,6 +1,6 @@
-// GncBackend on a landmark graph: the landmarks are reached only through sightings (uncertain
-// factors), so the trusted factors cannot place them, and the first pass starts from the batch
-// solvers' start (robust/gnc_backend.cpp).
+// GncBackend's starts (robust/gnc_backend.cpp, gnc_run.cpp): on a landmark graph the trusted
+// factors cannot place the landmarks, so the first pass starts from the batch solvers' start;
+// on a pose graph an answer that rejects nothing is checked against a GNC from that start.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "robust/backend_registry.h"
+#include "robust/gnc_backend.h"
 #include "solvers/io/dataset_reader.h"
 #include "solvers/problem/pose_graph_problem.h"
 
@@ -62,6 +63,31 @@ INSTANTIATE_TEST_SUITE_P(BothLosses, GncOnVictoriaPark, testing::Values("gnc-tls
                          [](const auto& info) {
                            return info.param == "gnc-tls" ? std::string("tls") : std::string("gm");
                          });
+
+// MIT's odometry leaves its first pass in the basin plain least squares reaches from the
+// file's start (770.66), and with nothing rejected no check ever looked elsewhere: gnc-gm
+// ended there. With nothing rejected the GNC is now also run from the batch solvers' start
+// (GncOptions::batchStartWhenNoneRejected) and the cheaper answer kept: the optimum.
+TEST(GncBatchStart, TakesTheBatchSolversStartWhenNothingIsRejected) {
+  const PoseGraphProblem problem =
+      buildProblem(io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/MIT.g2o"));
+  auto lm = makeBackend("lm");
+  lm->update(wholeProblemUpdate(problem));
+  const double optimum = lm->chi2();
+  ASSERT_NEAR(optimum, 41.163, 1e-3);
+  for (const bool batchStart : {true, false}) {
+    GncOptions go;
+    go.loss = GncLoss::GemanMcClure;
+    go.batchStartWhenNoneRejected = batchStart;
+    GncBackend gnc(BackendOptions{}, go);
+    gnc.update(wholeProblemUpdate(problem));
+    EXPECT_TRUE(gnc.rejected().empty()) << batchStart;
+    if (batchStart)
+      EXPECT_NEAR(gnc.chi2(), optimum, 1e-6 * optimum);
+    else
+      EXPECT_GT(gnc.chi2(), 10.0 * optimum);  // the basin it used to end in
+  }
+}
 
 }  // namespace
 }  // namespace loopd
