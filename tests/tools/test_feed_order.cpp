@@ -105,6 +105,19 @@ TEST(FeedOrder, OdometryJoinsNeighboursInIdOrder) {
   EXPECT_EQ(two.factor(ds.edges[2]).role, loopd::factor_t::ROLE_LOOP_CLOSURE);  // across robots
 }
 
+// Landmark 7 sighted from poses 2 and 4: one robot's, or (cut in two) two robots', which the
+// server cannot join through it (loopd-feed warns); a pose not fed sights nothing.
+TEST(FeedOrder, SaysWhichLandmarksMoreThanOneRobotSights) {
+  io::Dataset ds = sixPoses();
+  ds.edges.push_back(ds.edges[6]);
+  ds.edges.back().from = 4;
+  ds.edges.back().index = static_cast<int>(ds.edges.size()) - 1;
+  EXPECT_TRUE(FeedOrder(ds, -1, 1, false).sharedLandmarks(ds).empty());
+  EXPECT_EQ(FeedOrder(ds, -1, 2, false).sharedLandmarks(ds), (std::vector<std::int64_t>{7}));
+  EXPECT_EQ(FeedOrder(ds, -1, 2, true).sharedLandmarks(ds), (std::vector<std::int64_t>{7}));
+  EXPECT_TRUE(FeedOrder(ds, 4, 2, false).sharedLandmarks(ds).empty());  // pose 4 not fed
+}
+
 TEST(FeedOrder, AFileWithoutPosesIsRefused) {
   io::Dataset empty;
   empty.path = "empty.g2o";

@@ -63,4 +63,21 @@ loopd::factor_t FeedOrder::equivalenceFactor(const io::Edge& e, int robotOffset)
   return f;
 }
 
+std::vector<std::int64_t> FeedOrder::sharedLandmarks(const io::Dataset& ds) const {
+  std::unordered_map<std::int64_t, int> firstRobot;  // landmark → robot of a sighting
+  std::vector<std::int64_t> shared;
+  for (const auto& e : ds.edges) {
+    if (io::isBetween(e.type)) continue;
+    const auto r = robotOf_.find(e.from);
+    if (r == robotOf_.end()) continue;  // not fed
+    const auto [it, fresh] = firstRobot.emplace(e.to, r->second);
+    if (!fresh && it->second != r->second && it->second >= 0) {
+      shared.push_back(e.to);
+      it->second = -1;  // counted
+    }
+  }
+  std::sort(shared.begin(), shared.end());
+  return shared;
+}
+
 }  // namespace loopd::tools

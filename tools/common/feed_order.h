@@ -32,6 +32,10 @@ class FeedOrder {
   /// An EQUIV pair's edge (io::equivalenceEdge), trusted as loopd-solve trusts it: odometry
   /// within one robot, a loop closure with robust "none" (never down-weighted) across two.
   loopd::factor_t equivalenceFactor(const io::Edge& e, int robotOffset = 0) const;
+  /// The landmarks (file ids, ascending) that fed poses of more than one robot sight. The
+  /// server takes no cross-robot sightings yet, so each robot's sightings of such a landmark
+  /// go to a landmark of its own, and the robots share no constraint through it.
+  std::vector<std::int64_t> sharedLandmarks(const io::Dataset& ds) const;
 
  private:
   std::vector<std::int64_t> order_;

@@ -120,6 +120,14 @@ std::int8_t ambiguousMode(const std::vector<loopd::factor_t>& alternatives, int 
 int run(const Options& o) {
   io::Dataset ds = io::readDataset(o.dataset);
   const tools::FeedOrder feed(ds, o.poses, o.robots, o.interleave);
+  const std::vector<std::int64_t> shared = feed.sharedLandmarks(ds);
+  if (!shared.empty())
+    std::fprintf(stderr,
+                 "loopd-feed: warning: %zu landmarks (first: %lld) are sighted by more than one "
+                 "robot; the server takes no cross-robot sightings yet, so each robot sends its "
+                 "sightings to a landmark of its own, and the robots share no constraint "
+                 "through them\n",
+                 shared.size(), static_cast<long long>(shared.front()));
   const std::vector<std::int64_t>& order = feed.poses();
   const size_t n = order.size();
   const size_t robots = static_cast<size_t>(feed.robots());
