@@ -17,10 +17,7 @@ namespace {
 
 // Unknowns of a linear initialisation problem: `dim` scalars per free variable; the anchor
 // (and anything not connected) is known.
-struct LinearUnknowns {
-  std::vector<int> index;  // per Values slot: first unknown, or −1 if known
-  int count = 0;
-};
+using LinearUnknowns = ReachableUnknowns;
 
 // Adds w·(x_j − A·x_i − c) residual blocks of size D to normal equations, with x_i/x_j
 // either unknown (index ≥ 0) or known (value taken from `known`).
@@ -68,23 +65,10 @@ struct BlockNormalEquations {
 // variables in other components stay known (at their guess) and the systems stay regular.
 LinearUnknowns numberConnected(const FactorGraph& graph, const Values& values, int anchorSlot,
                                bool posesOnly, int dim) {
-  std::vector<std::vector<int>> adj(values.size());
-  for (const auto& f : graph.factors()) {
-    if (f->size() != 2) continue;
-    const int a = values.slot(f->key(0)), b = values.slot(f->key(1));
-    if (a < 0 || b < 0) continue;
-    if (posesOnly && (keyKind(f->key(1)) != KeyKind::Pose)) continue;
-    adj[a].push_back(b);
-    adj[b].push_back(a);
-  }
-  LinearUnknowns u;
-  u.index.assign(values.size(), -1);
-  for (int s : breadthFirstOrder(adj, anchorSlot))
-    if (s != anchorSlot) {
-      u.index[s] = u.count;
-      u.count += dim;
-    }
-  return u;
+  return numberReachable(
+      graph, values, anchorSlot,
+      [posesOnly](const Factor& f) { return !posesOnly || keyKind(f.key(1)) == KeyKind::Pose; },
+      [dim](int) { return dim; });
 }
 
 // Orientation of every pose along a breadth-first spanning tree (odometry first), used only

@@ -26,31 +26,16 @@ Mat2 rotatedBy(const Vec2& v) {
 
 // The relaxed unknowns: poses and landmarks reachable from the anchor through the factors
 // used here (others stay known, so the system stays regular).
-struct Unknowns {
-  std::vector<int> index;  // per slot: first unknown, or −1 if known
-  int count = 0;
-};
+using Unknowns = ReachableUnknowns;
 
 bool usedHere(const Factor& f) {
   return dynamic_cast<const BetweenFactorSE2*>(&f) || dynamic_cast<const PosePointFactor2*>(&f);
 }
 
-Unknowns numberReachable(const FactorGraph& graph, const Values& values, int anchorSlot) {
-  std::vector<std::vector<int>> adj(values.size());
-  for (const auto& f : graph.factors()) {
-    if (!usedHere(*f)) continue;
-    const int a = values.slot(f->key(0)), b = values.slot(f->key(1));
-    adj[a].push_back(b);
-    adj[b].push_back(a);
-  }
-  Unknowns u;
-  u.index.assign(values.size(), -1);
-  for (int s : breadthFirstOrder(adj, anchorSlot))
-    if (s != anchorSlot) {
-      u.index[s] = u.count;
-      u.count += values.type(s) == VarType::SE2 ? kPoseDim : kPointDim;
-    }
-  return u;
+Unknowns numberRelaxed(const FactorGraph& graph, const Values& values, int anchorSlot) {
+  return numberReachable(graph, values, anchorSlot, usedHere, [&values](int s) {
+    return values.type(s) == VarType::SE2 ? kPoseDim : kPointDim;
+  });
 }
 
 // Normal equations of residuals  r = Jᵢ·xᵢ + Jⱼ·xⱼ − c  (weight W) in which a known
@@ -119,7 +104,7 @@ std::vector<double> landmarkAidedHeadings2D(const FactorGraph& graph, const Valu
                                             const std::vector<double>& weightHeadings) {
   std::vector<double> theta = weightHeadings;
   theta[anchorSlot] = guess.se2(anchorSlot).theta;
-  const Unknowns u = numberReachable(graph, guess, anchorSlot);
+  const Unknowns u = numberRelaxed(graph, guess, anchorSlot);
   if (u.count == 0) return theta;
   RelaxedSystem system(u, guess, graph.size());
   for (const auto& f : graph.factors()) {
