@@ -39,8 +39,9 @@ struct GncOptions {
   bool odometryStart = true;
   /// If the first solve's answer rejects nothing, it is a least-squares solution in the
   /// trusted start's basin: also run the GNC from the batch solvers' linear initialization
-  /// (every factor) and keep it if its truncated cost is lower (MIT: 770.66 → 41.163 under
-  /// `gnc-gm`). Needs trustedInitialization and a linear initialization.
+  /// (every factor) and keep it if it rejects nothing either and its truncated cost is lower
+  /// (MIT: 770.66 → 41.163 under `gnc-gm`). Needs trustedInitialization and a linear
+  /// initialization.
   bool batchStartWhenNoneRejected = true;
   /// Outer steps start from the previous solution (true) or, as GTSAM does, from the values
   /// the GNC started from (false).

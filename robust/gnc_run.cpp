@@ -54,10 +54,7 @@ void GncBackend::Run::execute() {
   if (odometryCandidate_ && gnc_.consistentStart && rejectedCount() > 0) tryConsistentStart();
   // The kept solution, solved to convergence (its solves were capped); with the gate acting,
   // its decisions re-made at the converged estimate.
-  if (gated_)
-    refine(0);
-  else
-    solveWeighted(0);
+  solveToConvergence();
   runChecks(0);
   regateAtEnd();
   if (batchStartCandidate_ && rejectedCount() == 0) tryBatchStart();
@@ -170,6 +167,14 @@ void GncBackend::Run::gncPass(bool first, bool fromOdometry, const Values* from)
   // Report the weights at the final estimate (the last solve moved it); the solve itself
   // used the previous ones, as in GTSAM.
   b_.updateWeights(r2_, c2_);
+}
+
+// A kept answer's capped solves, finished: refined against the gate if it acts.
+void GncBackend::Run::solveToConvergence() {
+  if (gated_)
+    refine(0);
+  else
+    solveWeighted(0);
 }
 
 // Decides 0/1 against the gate at the current estimate, re-solves (at most `cap` iterations
@@ -299,10 +304,7 @@ void GncBackend::Run::tryBatchStart() {
   const int outer = b_.outer_;
   gncPass(false, false, &batchStart);
   b_.outer_ += outer;
-  if (gated_)
-    refine(0);
-  else
-    solveWeighted(0);
+  solveToConvergence();
   const Candidate tried = snapshot();
   const int rejected = rejectedCount();
   const bool better = rejected == 0 && tried.cost < kept.cost;

@@ -40,6 +40,7 @@ class GncBackend::Run {
   /// for the first pass).
   void gncPass(bool first, bool fromOdometry = false, const Values* from = nullptr);
   void refine(int cap);
+  void solveToConvergence();
   double tlsCost() const;
   Candidate snapshot() const;
   void restore(const Candidate& c);

@@ -10,8 +10,8 @@
 
 #include "robust/backend_registry.h"
 #include "robust/gnc_backend.h"
-#include "solvers/io/dataset_reader.h"
 #include "solvers/problem/pose_graph_problem.h"
+#include "tests/robust/dataset_prefix.h"
 
 namespace loopd {
 namespace {
@@ -39,8 +39,7 @@ class GncOnVictoriaPark : public testing::TestWithParam<std::string> {};
 // rejected. Now each rejects a few sightings far in the tail (at the all-in optimum, 6184.12,
 // the worst have chi2 259, 138 and 83 for 2 dof) and lands on the optimum of what it keeps.
 TEST_P(GncOnVictoriaPark, RejectsOnlyTheTailAndReachesTheOptimumOfWhatItKeeps) {
-  const PoseGraphProblem problem =
-      buildProblem(io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/victoria_park.txt"));
+  const PoseGraphProblem problem = buildProblem(test::loadPrefix("victoria_park.txt"));
   auto gnc = makeBackend(GetParam());
   gnc->update(wholeProblemUpdate(problem));
   const std::vector<FactorId> rejected = gnc->rejected();
@@ -69,8 +68,7 @@ INSTANTIATE_TEST_SUITE_P(BothLosses, GncOnVictoriaPark, testing::Values("gnc-tls
 // ended there. With nothing rejected the GNC is now also run from the batch solvers' start
 // (GncOptions::batchStartWhenNoneRejected) and the cheaper answer kept: the optimum.
 TEST(GncBatchStart, TakesTheBatchSolversStartWhenNothingIsRejected) {
-  const PoseGraphProblem problem =
-      buildProblem(io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/MIT.g2o"));
+  const PoseGraphProblem problem = buildProblem(test::loadPrefix("MIT.g2o"));
   auto lm = makeBackend("lm");
   lm->update(wholeProblemUpdate(problem));
   const double optimum = lm->chi2();
@@ -94,8 +92,7 @@ TEST(GncBatchStart, TakesTheBatchSolversStartWhenNothingIsRejected) {
 // cheaper at the gate, but an answer that rejects closures does not replace one that rejects
 // none (kept, gnc-gm stays at the optimum).
 TEST(GncBatchStart, DoesNotReplaceAnAnswerByOneThatRejectsClosures) {
-  const PoseGraphProblem problem =
-      buildProblem(io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/kitti_00.g2o"));
+  const PoseGraphProblem problem = buildProblem(test::loadPrefix("kitti_00.g2o"));
   auto lm = makeBackend("lm");
   lm->update(wholeProblemUpdate(problem));
   auto gnc = makeBackend("gnc-gm");
