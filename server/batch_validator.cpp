@@ -96,10 +96,6 @@ void FactorBatchValidator::checkFactor(const F& f, std::int64_t reportId,
       bad(E::INVALID_FIELD, "both keys are " + wireKeyName(f.keys[0]));
     if (between && f.role == F::ROLE_ODOMETRY && f.keys[0].robot != f.keys[1].robot)
       bad(E::INVALID_FIELD, "ROLE_ODOMETRY joins poses of two robots (use ROLE_LOOP_CLOSURE)");
-    if (!between && nk == 2 && f.keys[0].robot != f.keys[1].robot)
-      bad(E::INVALID_FIELD, "landmark of robot " + std::to_string(f.keys[1].robot) +
-                                " sighted from robot " + std::to_string(f.keys[0].robot) +
-                                ": cross-robot landmark sightings are not supported yet");
   }
 
   const int ms = measurementSize(f.type);

@@ -8,6 +8,7 @@
 #include <cmath>
 
 #include "loopd/error_t.hpp"
+#include "server/frame_groups.h"
 #include "server/wire_factors.h"
 
 namespace loopd::server {
@@ -90,36 +91,32 @@ std::optional<VarType> Engine::robotPoseType(std::uint32_t robot) const {
 bool Engine::idUsed(const std::string& s, std::int64_t id) const { return sessions_.idUsed(s, id); }
 bool Engine::idLive(const std::string& s, std::int64_t id) const { return sessions_.idLive(s, id); }
 
+std::map<FactorId, InterEdge> Engine::currentInterEdges(const Staged* building) const {
+  std::map<FactorId, InterEdge> edges = interEdges_;
+  auto apply = [&](const Staged& s) {
+    for (FactorId r : s.update.removals) edges.erase(r);
+    for (const auto& f : s.update.factors)
+      if (isAnchored(*f)) edges[f->id()] = interEdgeOf(*f);
+  };
+  for (const Staged& s : staged_) apply(s);
+  if (building) apply(*building);
+  return edges;
+}
+
 std::map<std::uint32_t, std::uint32_t> Engine::frameGroups(const loopd::factor_batch_t& b) const {
   // From the certain inter-robot factors themselves (not robots_' parents, which regroup()
   // updates only after a round), so the answer depends on the order of batches alone, not on
   // how they were coalesced into rounds: a journal replay decides exactly as the live run.
-  std::map<FactorId, std::pair<std::uint32_t, std::uint32_t>> edges = interEdges_;
-  for (const Staged& s : staged_) {
-    for (FactorId r : s.update.removals) edges.erase(r);
-    for (const auto& f : s.update.factors)
-      if (isAnchored(*f)) edges[f->id()] = {keyRobot(f->key(1)), keyRobot(f->key(3))};
-  }
+  // The batch's own sightings are not counted (whether they join is decided when staged).
+  std::map<FactorId, InterEdge> edges = currentInterEdges(nullptr);
   for (std::int64_t rid : b.remove_ids)
     if (const auto fid = sessions_.liveId(b.sender, rid)) edges.erase(*fid);
-  std::map<std::uint32_t, std::uint32_t> parent;
-  auto find = [&](std::uint32_t r) {
-    if (!parent.count(r)) parent[r] = r;
-    while (parent[r] != r) r = parent[r] = parent[parent[r]];
-    return r;
-  };
-  auto join = [&](std::uint32_t r, std::uint32_t s) {
-    const std::uint32_t a = find(r), c = find(s);
-    if (a != c) parent[std::max(a, c)] = std::min(a, c);
-  };
-  for (const auto& [id, e] : edges) join(e.first, e.second);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> joins;
   for (const auto& f : b.factors)
     if (isInterRobot(f))
-      join(static_cast<std::uint32_t>(f.keys[0].robot),
-           static_cast<std::uint32_t>(f.keys[1].robot));
-  std::map<std::uint32_t, std::uint32_t> out;
-  for (const auto& [r, p] : parent) out[r] = find(r);
-  return out;
+      joins.emplace_back(static_cast<std::uint32_t>(f.keys[0].robot),
+                         static_cast<std::uint32_t>(f.keys[1].robot));
+  return frameGroupsOf(edges, joins);
 }
 
 std::uint32_t Engine::root(std::uint32_t r) const {
@@ -146,12 +143,26 @@ bool Engine::step() {
   }
   if (batch.empty()) return false;
   lastInput_ = Clock::now();
+  std::map<std::uint32_t, int> posesStaged;  // new poses of each robot in the staged round
   for (auto& m : batch) {
     if (m->channel == pub_.channels().command) {
       flush();
+      posesStaged.clear();
       handleCommand(*m);
-    } else {
-      handleFactors(m, false);
+      continue;
+    }
+    const size_t before = staged_.size();
+    handleFactors(m, false);
+    if (staged_.size() == before) continue;
+    bool full = false;
+    const Values& added = staged_.back().update.initial;
+    for (int i = 0; i < added.size(); ++i)
+      if (keyKind(added.key(i)) == KeyKind::Pose)
+        full |= ++posesStaged[keyRobot(added.key(i))] >= opt_.posesPerUpdate;
+    if (full && opt_.posesPerUpdate > 0) {
+      retryHolds();
+      flush();
+      posesStaged.clear();
     }
   }
   retryHolds();

@@ -16,6 +16,13 @@
 // robots; a group left without a root prior gets one at its current value. Estimates are
 // published as A_r ⊕ x_r.
 //
+// A pose of robot r may sight a landmark of robot s (cross-robot sighting): through the
+// anchors it becomes an AnchoredPosePoint/BearingRange factor on (A_r, x_r, A_s, l_s). One
+// sighting leaves the rotation between the frames free, so a pair's sightings are kept back
+// (pending_, engine_sightings.cpp) until another factor joins the two frames or they name
+// enough distinct landmarks to fix the transform (2 in 2D, 3 in 3D); the joining robot's
+// anchor then starts at the least-squares alignment of those landmarks.
+//
 // An ambiguous alternative never creates an anchor (under "none" or another alternative it
 // would be unconstrained, and each alternative implies another anchor value): an inter-robot
 // alternative is accepted only between robots already joined by certain inter-robot factors
@@ -40,6 +47,7 @@
 #include "server/journal.h"
 #include "server/publisher.h"
 #include "server/session_table.h"
+#include "server/wire_factors.h"
 #include "solvers/backend/backend.h"
 
 namespace loopd::server {
@@ -54,6 +62,11 @@ struct EngineOptions {
   int maxMessageBytes = 256 * 1024;  // larger messages are refused before decoding
   double heartbeatSeconds = 1.0;
   int maxHypotheses = 10;  // mh: live hypotheses at most (BackendOptions::maxHypotheses)
+  // Batches that queued while the engine solved are applied together, but one update takes
+  // at most this many new poses of one robot (0: no bound): a long stretch of poses composed
+  // from odometry, solved in one step, can land in another basin than one pose at a time does
+  // (Victoria Park fed at full speed: rounds of thousands of poses ended at χ² 10⁵–10⁶).
+  int posesPerUpdate = 100;
 };
 
 struct Inbound {
@@ -126,6 +139,12 @@ class Engine : private GraphView {
     std::int64_t id = 0;
     AmbiguousFactor factor;
   };
+  /// A cross-robot sighting kept out of the solver until its robots' frames are joined.
+  struct PendingSighting {
+    FactorPtr factor;  // single-frame form (keys x_r, l_s), its FactorId set
+    Owner owner;
+  };
+  using RobotPair = std::pair<std::uint32_t, std::uint32_t>;  // lower robot first
   struct Decoded {
     std::shared_ptr<const loopd::factor_batch_t> batch;
     std::shared_ptr<const Inbound> raw;
@@ -140,6 +159,7 @@ class Engine : private GraphView {
     std::vector<Owner> owners;  // parallel to update.factors (sender id −1: server-owned)
     std::vector<Group> groups;  // parallel to update.ambiguous
     std::vector<FactorId> groupRemovals;  // internal ids of ambiguous groups removed
+    std::map<RobotPair, std::vector<PendingSighting>> pendingBefore;
   };
   struct Held {
     Decoded d;
@@ -178,8 +198,19 @@ class Engine : private GraphView {
   const Values* holder(Key k) const;
   bool known(Key k) const { return holder(k) != nullptr; }
   std::uint32_t root(std::uint32_t r) const;
-  void joinRobots(std::uint32_t r, std::uint32_t s, Key xr, Key xs, const Factor& between,
-                  const Values& batchValues, Staged& st);
+  /// Joins r's and s's frames (anchors created or groups merged) given M, the pose of s's frame
+  /// in r's: from an inter-robot between factor M = x_r·Z·x_s⁻¹, from sightings an alignment.
+  void joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const SE3& m3, Staged& st);
+  /// Cross-robot sightings (engine_sightings.cpp): the batch's are kept back while their
+  /// robots' frames are not joined; all of a pair's go in (anchored) once its frames are joined
+  /// or its sightings fix the transform between them. `batchValues`: the batch's and the
+  /// known values its factors refer to.
+  void stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings,
+                      const Values& batchValues, Staged& st);
+  /// Removes a kept-back sighting; false if `id` is not one.
+  bool dropPendingSighting(FactorId id);
+  /// The inter-robot edges of the graph with the staged rounds (and `building`) applied.
+  std::map<FactorId, InterEdge> currentInterEdges(const Staged* building) const;
   FactorPtr priorAt(Key k, const Values& from, int slot, double information);
   FactorId newFactorId() { return nextFactorId_++; }
 
@@ -231,7 +262,8 @@ class Engine : private GraphView {
   std::unordered_map<FactorId, std::pair<int, double>> lastGroupDecisions_;
   FactorId nextFactorId_ = 1;
   std::int64_t loopClosures_ = 0;
-  std::map<FactorId, std::pair<std::uint32_t, std::uint32_t>> interEdges_;  // anchored factors
+  std::map<FactorId, InterEdge> interEdges_;                   // anchored factors
+  std::map<RobotPair, std::vector<PendingSighting>> pending_;  // sightings waiting for a join
   bool regroupNeeded_ = false;
 
   std::vector<Staged> staged_;

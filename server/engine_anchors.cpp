@@ -5,8 +5,8 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <functional>
 
+#include "server/frame_groups.h"
 #include "server/wire_factors.h"
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
@@ -25,8 +25,8 @@ FactorPtr Engine::priorAt(Key k, const Values& from, int slot, double informatio
   return f;
 }
 
-void Engine::joinRobots(std::uint32_t r, std::uint32_t s, Key xr, Key xs, const Factor& between,
-                        const Values& vals, Staged& st) {
+void Engine::joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const SE3& m3,
+                        Staged& st) {
   RobotInfo& R = robots_.at(r);
   RobotInfo& S = robots_.at(s);
   BackendUpdate& u = st.update;
@@ -60,26 +60,19 @@ void Engine::joinRobots(std::uint32_t r, std::uint32_t s, Key xr, Key xs, const 
     spdlog::info("robot {} anchors a common frame", r);
   }
   if (R.anchored != S.anchored) {
-    // The newcomer's anchor, from the factor: A_s = A_r·x_r·Z·x_s⁻¹ (or the reverse).
+    // The newcomer's anchor from M (s's frame in r's): A_s = A_r·M, A_r = A_s·M⁻¹.
     const bool newIsS = !S.anchored;
     const std::uint32_t n = newIsS ? s : r, o = newIsS ? r : s;
     Values av;
     anchorValue(anchorKey(o), av);
     SE2 a2;
     SE3 a3;
-    if (se3) {
-      const SE3 Z = static_cast<const BetweenFactorSE3&>(between).measured();
-      const SE3 Ao = av.se3(0);
-      a3 = newIsS ? Ao * se3Of(vals, xr) * Z * se3Of(vals, xs).inverse()
-                  : Ao * se3Of(vals, xs) * Z.inverse() * se3Of(vals, xr).inverse();
-    } else {
-      const SE2 Z = static_cast<const BetweenFactorSE2&>(between).measured();
-      const SE2 Ao = av.se2(0);
-      a2 = newIsS ? Ao * se2Of(vals, xr) * Z * se2Of(vals, xs).inverse()
-                  : Ao * se2Of(vals, xs) * Z.inverse() * se2Of(vals, xr).inverse();
-    }
+    if (se3)
+      a3 = newIsS ? av.se3(0) * m3 : av.se3(0) * m3.inverse();
+    else
+      a2 = newIsS ? av.se2(0) * m2 : av.se2(0) * m2.inverse();
     RobotInfo& N = robots_.at(n);
-    N.anchorPrior = insertAnchor(anchorKey(n), a2, a3, 0.0);  // the factor determines it
+    N.anchorPrior = insertAnchor(anchorKey(n), a2, a3, 0.0);  // the factors determine it
     N.anchored = true;
     N.parent = root(o);
     spdlog::info("robot {} joins robot {}'s frame", n, root(o));
@@ -100,17 +93,11 @@ void Engine::regroup(std::vector<Key>& moved) {
   // Inter-robot factors were removed: recompute the groups of joined robots from the live ones;
   // a group left without a root prior gets one (at its current value) on its lowest robot.
   regroupNeeded_ = false;
-  std::map<std::uint32_t, std::uint32_t> parent;
-  std::function<std::uint32_t(std::uint32_t)> find = [&](std::uint32_t r) {
-    while (parent[r] != r) r = parent[r] = parent[parent[r]];
-    return r;
-  };
+  const std::map<std::uint32_t, std::uint32_t> groups = frameGroupsOf(interEdges_);
+  std::map<std::uint32_t, std::uint32_t> parent;  // anchored robot → its group's root
   for (auto& [r, info] : robots_)
-    if (info.anchored) parent[r] = r;
-  for (const auto& [id, e] : interEdges_) {
-    const std::uint32_t a = find(e.first), b = find(e.second);
-    if (a != b) parent[std::max(a, b)] = std::min(a, b);
-  }
+    if (info.anchored) parent[r] = groups.count(r) ? groups.at(r) : r;
+  auto find = [&](std::uint32_t r) { return parent.at(r); };
   std::map<std::uint32_t, bool> hasRootPrior;
   for (auto& [r, p] : parent) hasRootPrior[find(r)] |= robots_.at(r).anchorPrior != 0;
   BackendUpdate u;

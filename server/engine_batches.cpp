@@ -14,6 +14,8 @@
 #include "server/fingerprint.h"
 #include "server/wire.h"
 #include "server/wire_factors.h"
+#include "solvers/factors/between_factor_se2.h"
+#include "solvers/factors/between_factor_se3.h"
 #include "solvers/problem/initial_guess.h"
 
 namespace loopd::server {
@@ -195,7 +197,9 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   std::vector<FactorPtr> intra;
   for (size_t i = 0; i < b.factors.size(); ++i) {
     built[i] = buildFactor(b.factors[i]);
-    if (!isInterRobot(b.factors[i])) intra.push_back(built[i]);
+    // Inter-robot factors relate two frames: they do not predict values in one.
+    if (!isInterRobot(b.factors[i]) && !isCrossRobotSighting(b.factors[i]))
+      intra.push_back(built[i]);
   }
   predictMissingValues(intra, knownVals, guess);
   for (Key k : keys)
@@ -207,6 +211,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   Staged st;
   st.d = d;
   st.robotsBefore = robots_;
+  st.pendingBefore = pending_;
   BackendUpdate& u = st.update;
   for (int s = 0; s < guess.size(); ++s) {
     u.initial.insertFrom(guess, s);
@@ -247,23 +252,37 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   // The batch's factors.
   Values batchValues = knownVals;  // known ∪ guess, for anchor initialisation
   for (int s = 0; s < guess.size(); ++s) batchValues.insertFrom(guess, s);
+  std::vector<std::pair<FactorPtr, Owner>> sightings;  // cross-robot ones
   for (size_t i = 0; i < b.factors.size(); ++i) {
     const W& wf = b.factors[i];
     FactorPtr f = built[i];
     if (isInterRobot(wf)) {
       const Key xr = toKey(wf.keys[0]), xs = toKey(wf.keys[1]);
-      joinRobots(keyRobot(xr), keyRobot(xs), xr, xs, *built[i], batchValues, st);
-      f = anchoredFactor(wf, *built[i]);
+      SE2 m2;
+      SE3 m3;
+      if (const auto* z = dynamic_cast<const BetweenFactorSE2*>(built[i].get()))
+        m2 = se2Of(batchValues, xr) * z->measured() * se2Of(batchValues, xs).inverse();
+      else
+        m3 = se3Of(batchValues, xr) * static_cast<const BetweenFactorSE3&>(*built[i]).measured() *
+             se3Of(batchValues, xs).inverse();
+      joinRobots(keyRobot(xr), keyRobot(xs), m2, m3, st);
+      f = anchoredFactor(*built[i]);
     }
     const FactorId id = newFactorId();
     std::const_pointer_cast<Factor>(f)->setId(id);
     if (isUncertain(f->role()))
       std::const_pointer_cast<Factor>(f)->setRobustRequest({wf.robust, wf.robust_param});
-    u.factors.push_back(f);
-    st.owners.push_back({b.sender, wf.id, isUncertain(f->role())});
     sessions_.addId(b.sender, wf.id, id);
     st.addedIds.emplace_back(wf.id, id);
+    const Owner owner{b.sender, wf.id, isUncertain(f->role())};
+    if (isCrossRobotSighting(wf)) {
+      sightings.emplace_back(f, owner);
+      continue;
+    }
+    u.factors.push_back(f);
+    st.owners.push_back(owner);
   }
+  stageSightings(sightings, batchValues, st);
   // Ambiguous groups: each alternative is built like a factor_t and gets an internal id of
   // its own; the group's internal id is what the sender's id maps to. An inter-robot
   // alternative goes through the anchors of its robots, which certain inter-robot factors
@@ -277,7 +296,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     g.factor.nullWeight = wa.null_hypothesis && wa.null_weight > 0.0 ? wa.null_weight : 1.0;
     for (const auto& wf : wa.alternatives) {
       std::shared_ptr<Factor> f = buildFactor(wf);
-      if (isInterRobot(wf)) f = anchoredFactor(wf, *f);
+      if (isInterRobot(wf) || isCrossRobotSighting(wf)) f = anchoredFactor(*f);
       f->setId(newFactorId());
       f->setRobustRequest({wf.robust, wf.robust_param});  // applies once flattened
       g.factor.alternatives.push_back(std::move(f));
@@ -291,7 +310,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     const FactorId fid = sessions_.removeId(b.sender, rid);
     if (isGroupId(fid))
       st.groupRemovals.push_back(fid);
-    else
+    else if (!dropPendingSighting(fid))
       u.removals.push_back(fid);
     st.removedIds.emplace_back(rid, fid);
   }
@@ -364,6 +383,7 @@ void Engine::undo(Staged& s) {
     sessions_.undoRemove(sender, it->first, it->second);
   for (const auto& [id, fid] : s.addedIds) sessions_.undoAdd(sender, id);
   robots_ = s.robotsBefore;
+  pending_ = s.pendingBefore;
 }
 
 void Engine::commit(Staged& s) {
@@ -380,7 +400,7 @@ void Engine::commit(Staged& s) {
   for (size_t i = 0; i < s.update.factors.size(); ++i) {
     const FactorPtr& f = s.update.factors[i];
     live_[f->id()] = f;
-    if (isAnchored(*f)) interEdges_[f->id()] = {keyRobot(f->key(1)), keyRobot(f->key(3))};
+    if (isAnchored(*f)) interEdges_[f->id()] = interEdgeOf(*f);
     if (s.owners[i].id >= 0) {
       owners_[f->id()] = s.owners[i];
       if (s.owners[i].uncertain) ++loopClosures_;

@@ -1,7 +1,7 @@
 // SAVE_SNAPSHOT: the graph and estimate as a g2o file loopd-solve reads (README, Snapshots):
 // vertices in the frame the estimates are published in, ids in one block per robot and kind,
-// the factors g2o can express as edges and the ambiguous groups as HYPOTHESES; priors and
-// bearing-range sightings are left out and counted.
+// the factors g2o can express as edges and the ambiguous groups as HYPOTHESES; priors,
+// bearing-range sightings and cross-robot sightings kept back are left out and counted.
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -9,6 +9,7 @@
 #include <map>
 
 #include "server/anchored_between_factor.h"
+#include "server/anchored_sighting_factor.h"
 #include "server/engine.h"
 #include "solvers/factors/landmark_factors.h"
 #include "solvers/io/estimate_writer.h"
@@ -57,7 +58,8 @@ class SnapshotIds {
 };
 
 // A factor as a g2o edge between snapshot ids (measurements are relative, so they hold in any
-// frame: an anchored inter-robot factor is the between of its two common-frame poses). False
+// frame: an anchored inter-robot factor is the between of its two common-frame poses, an
+// anchored sighting the sighting of its common-frame landmark). False
 // for what g2o cannot express: priors, bearing-range.
 bool toG2oEdge(const Factor& f, const SnapshotIds& id, io::Edge& e) {
   e = io::Edge();
@@ -77,6 +79,21 @@ bool toG2oEdge(const Factor& f, const SnapshotIds& id, io::Edge& e) {
     z.toTranslationQuaternion(e.measurement.data());
     e.information = info;
   };
+  auto point2 = [&](Key pose, Key landmark, const Vec2& z, const Eigen::Matrix2d& info) {
+    e.type = io::EdgeType::PosePoint2;
+    e.from = id(pose);
+    e.to = id(landmark);
+    e.measurement[0] = z.x();
+    e.measurement[1] = z.y();
+    e.information.topLeftCorner<2, 2>() = info;
+  };
+  auto point3 = [&](Key pose, Key landmark, const Vec3& z, const Mat3& info) {
+    e.type = io::EdgeType::PosePoint3;
+    e.from = id(pose);
+    e.to = id(landmark);
+    for (int i = 0; i < 3; ++i) e.measurement[static_cast<size_t>(i)] = z[i];
+    e.information.topLeftCorner<3, 3>() = info;
+  };
   if (const auto* b = dynamic_cast<const BetweenFactorSE2*>(&f)) {
     se2(f.key(0), f.key(1), b->measured(), b->information());
   } else if (const auto* b = dynamic_cast<const BetweenFactorSE3*>(&f)) {
@@ -86,18 +103,13 @@ bool toG2oEdge(const Factor& f, const SnapshotIds& id, io::Edge& e) {
   } else if (const auto* a = dynamic_cast<const AnchoredBetweenFactorSE3*>(&f)) {
     se3(f.key(1), f.key(3), a->measured(), a->information());
   } else if (const auto* p = dynamic_cast<const PosePointFactor2*>(&f)) {
-    e.type = io::EdgeType::PosePoint2;
-    e.from = id(f.key(0));
-    e.to = id(f.key(1));
-    e.measurement[0] = p->measured().x();
-    e.measurement[1] = p->measured().y();
-    e.information.topLeftCorner<2, 2>() = p->information();
+    point2(f.key(0), f.key(1), p->measured(), p->information());
+  } else if (const auto* p = dynamic_cast<const AnchoredPosePointFactor2*>(&f)) {
+    point2(f.key(1), f.key(3), p->measured(), p->information());
   } else if (const auto* p = dynamic_cast<const PosePointFactor3*>(&f)) {
-    e.type = io::EdgeType::PosePoint3;
-    e.from = id(f.key(0));
-    e.to = id(f.key(1));
-    for (int i = 0; i < 3; ++i) e.measurement[static_cast<size_t>(i)] = p->measured()[i];
-    e.information.topLeftCorner<3, 3>() = p->information();
+    point3(f.key(0), f.key(1), p->measured(), p->information());
+  } else if (const auto* p = dynamic_cast<const AnchoredPosePointFactor3*>(&f)) {
+    point3(f.key(1), f.key(3), p->measured(), p->information());
   } else {
     return false;
   }
@@ -183,14 +195,22 @@ void Engine::writeSnapshot(const std::string& path) const {
   if (skippedGroups > 0)
     notes += (notes.empty() ? "" : ", ") + std::to_string(skippedGroups) +
              " ambiguous groups with bearing-range alternatives";
+  size_t keptBack = 0;
+  for (const auto& [pair, list] : pending_) keptBack += list.size();
+  const std::string keptNote =
+      keptBack == 0 ? ""
+                    : std::to_string(keptBack) +
+                          " cross-robot sightings, kept back until their robots share a frame";
   io::writeG2oGraph(path, ds);
   appendText(path, "# loopd snapshot: " + std::to_string(ds.poses.size()) + " poses, " +
                        std::to_string(ds.landmarks.size()) + " landmarks, " +
                        std::to_string(ds.edges.size()) + " edges (update " +
                        std::to_string(updateSeq_) + ")\n" + ids.legend() +
-                       (notes.empty() ? "" : "# not written (no g2o form): " + notes + "\n"));
+                       (notes.empty() ? "" : "# not written (no g2o form): " + notes + "\n") +
+                       (keptNote.empty() ? "" : "# not written: " + keptNote + "\n"));
   if (!notes.empty())
     spdlog::warn("snapshot {}: not written (g2o has no form for them): {}", path, notes);
+  if (!keptNote.empty()) spdlog::warn("snapshot {}: not written: {}", path, keptNote);
   spdlog::info("snapshot {}: {} poses, {} landmarks, {} edges ({} gauge priors left out)", path,
                ds.poses.size(), ds.landmarks.size(), ds.edges.size(), gauge);
 }

@@ -26,10 +26,11 @@ std::string trim(const std::string& s) {
 
 const char* const kKeys[] = {"lcm-url",  "solver",        "channel-prefix", "journal",
                              "resume",   "publish-every", "log-level",      "hold-seconds",
-                             "hold-max", "idle-seconds",  "max-hypotheses", "config"};
+                             "hold-max", "idle-seconds",  "max-hypotheses", "poses-per-update",
+                             "config"};
 
 // The ranges of the numeric flags (serverUsage() and README name them).
-constexpr int kMaxCount = 1000000;       // --publish-every, --hold-max
+constexpr int kMaxCount = 1000000;       // --publish-every, --hold-max, --poses-per-update
 constexpr double kMaxSeconds = 86400.0;  // --hold-seconds, --idle-seconds: a day
 constexpr int kMaxHypotheses = 1000;     // --max-hypotheses (as loopd-solve's)
 
@@ -96,6 +97,8 @@ void apply(ServerConfig& c, const std::string& k, const std::string& v) {
     c.idleSeconds = toDouble(k, v, 0, kMaxSeconds);
   else if (k == "max-hypotheses")
     c.maxHypotheses = toInt(k, v, 1, kMaxHypotheses);
+  else if (k == "poses-per-update")
+    c.posesPerUpdate = toInt(k, v, 0, kMaxCount);
 }
 
 void loadFile(ServerConfig& c, const std::string& path) {
@@ -186,6 +189,9 @@ std::string serverUsage() {
          "  --idle-seconds S      input pause before iterating to convergence, 0-86400 (default "
          "0.5)\n"
          "  --max-hypotheses K    mh: live hypotheses kept at most, 1-1000 (default 10)\n"
+         "  --poses-per-update N  batches queued while solving are applied together, at most\n"
+         "                        N new poses of one robot per update, 0-1000000 (default\n"
+         "                        100; 0 = no bound)\n"
          "  --log-level L         trace|debug|info|warn|error|critical|off (default info)\n"
          "  --config FILE         `key = value` lines with the names above; flags override\n"
          "  --help                this text\n";

@@ -17,7 +17,8 @@ struct ServerConfig {
   double holdSeconds = 30.0;
   int holdMax = 1000;
   double idleSeconds = 0.5;
-  int maxHypotheses = 10;  // mh: live hypotheses at most (K)
+  int maxHypotheses = 10;    // mh: live hypotheses at most (K)
+  int posesPerUpdate = 100;  // EngineOptions::posesPerUpdate
   bool help = false;
 };
 

@@ -3,6 +3,7 @@
 #include <stdexcept>
 
 #include "server/anchored_between_factor.h"
+#include "server/anchored_sighting_factor.h"
 #include "server/wire.h"
 #include "solvers/factors/landmark_factors.h"
 #include "solvers/factors/prior_factors.h"
@@ -84,20 +85,49 @@ bool isInterRobot(const W& f) {
          f.keys[0].robot != f.keys[1].robot;
 }
 
-std::shared_ptr<Factor> anchoredFactor(const W& wf, const Factor& built) {
-  const Key xr = toKey(wf.keys[0]), xs = toKey(wf.keys[1]);
-  const Key ar = anchorKey(keyRobot(xr)), as = anchorKey(keyRobot(xs));
-  const Eigen::MatrixXd info = informationOf(wf);
-  if (wf.type == W::BETWEEN_SE2) {
-    const auto& bf = static_cast<const BetweenFactorSE2&>(built);
-    return std::make_shared<AnchoredBetweenFactorSE2>(
-        ar, xr, as, xs, bf.measured(), Eigen::Matrix3d(info), FactorRole::LoopClosure);
-  }
-  const auto& bf = static_cast<const BetweenFactorSE3&>(built);
-  return std::make_shared<AnchoredBetweenFactorSE3>(ar, xr, as, xs, bf.measured(), Mat6(info),
-                                                    FactorRole::LoopClosure);
+bool isCrossRobotSighting(const W& f) {
+  return (f.type == W::POSE_POINT2 || f.type == W::POSE_POINT3 || f.type == W::BEARING_RANGE2) &&
+         f.keys[0].robot != f.keys[1].robot;
+}
+
+std::shared_ptr<Factor> anchoredFactor(const Factor& built) {
+  const Key xr = built.key(0), other = built.key(1);
+  const Key ar = anchorKey(keyRobot(xr)), as = anchorKey(keyRobot(other));
+  std::shared_ptr<Factor> out;
+  if (const auto* b = dynamic_cast<const BetweenFactorSE2*>(&built))
+    out = std::make_shared<AnchoredBetweenFactorSE2>(ar, xr, as, other, b->measured(),
+                                                     b->information(), FactorRole::LoopClosure);
+  else if (const auto* b = dynamic_cast<const BetweenFactorSE3*>(&built))
+    out = std::make_shared<AnchoredBetweenFactorSE3>(ar, xr, as, other, b->measured(),
+                                                     b->information(), FactorRole::LoopClosure);
+  else if (const auto* p = dynamic_cast<const PosePointFactor2*>(&built))
+    out = std::make_shared<AnchoredPosePointFactor2>(ar, xr, as, other, p->measured(),
+                                                     p->information(), built.role());
+  else if (const auto* p = dynamic_cast<const PosePointFactor3*>(&built))
+    out = std::make_shared<AnchoredPosePointFactor3>(ar, xr, as, other, p->measured(),
+                                                     p->information(), built.role());
+  else if (const auto* p = dynamic_cast<const BearingRangeFactor2*>(&built))
+    out = std::make_shared<AnchoredBearingRangeFactor2>(ar, xr, as, other, p->measured(),
+                                                        p->information(), built.role());
+  else
+    throw std::invalid_argument(std::string("no anchored form of ") + built.typeName());
+  out->setId(built.id());
+  out->setRobustRequest(built.robustRequest());
+  return out;
 }
 
 bool isAnchored(const Factor& f) { return f.size() == 4; }
+
+InterEdge interEdgeOf(const Factor& f) {
+  InterEdge e;
+  e.r = keyRobot(f.key(1));
+  e.s = keyRobot(f.key(3));
+  const VarType t = f.varType(3);
+  if (t == VarType::Point2 || t == VarType::Point3) {
+    e.landmark = f.key(3);
+    e.needed = t == VarType::Point2 ? 2 : 3;
+  }
+  return e;
+}
 
 }  // namespace loopd::server

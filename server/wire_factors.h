@@ -22,10 +22,22 @@ SE3 se3From(const std::vector<double>& m);
 std::shared_ptr<Factor> buildFactor(const loopd::factor_t& f);
 /// A between factor whose two keys belong to different robots.
 bool isInterRobot(const loopd::factor_t& f);
-/// An inter-robot between factor (`built` = its intra-robot form) evaluated through the robots'
-/// anchors: keys A_r, x_r, A_s, x_s. The anchors must exist (Engine::joinRobots).
-std::shared_ptr<Factor> anchoredFactor(const loopd::factor_t& wf, const Factor& built);
+/// A landmark sighting whose pose belongs to another robot than the landmark.
+bool isCrossRobotSighting(const loopd::factor_t& f);
+/// An inter-robot between factor or a cross-robot sighting (`built`: its single-frame form)
+/// evaluated through the robots' anchors: keys A_r, x_r, A_s, then x_s or l_s. The anchors
+/// must exist (Engine::joinRobots).
+/// Keeps `built`'s id and robust request.
+std::shared_ptr<Factor> anchoredFactor(const Factor& built);
 /// An anchored (inter-robot) factor: the robots it joins are recorded as inter-robot edges.
 bool isAnchored(const Factor& f);
+
+/// An anchored factor as an edge between its two robots' frames (frame_groups.h).
+struct InterEdge {
+  std::uint32_t r = 0, s = 0;  // the pose's robot, the other key's robot
+  Key landmark = 0;            // a sighting's landmark; 0 for a between factor
+  int needed = 0;  // distinct landmarks of a pair that fix its frames (2 in 2D, 3 in 3D)
+};
+InterEdge interEdgeOf(const Factor& anchored);
 
 }  // namespace loopd::server

@@ -56,6 +56,7 @@ BearingRangeFactor2::BearingRangeFactor2(Key pose, Key point, const Vec2& measur
                                          const Eigen::Matrix2d& information, FactorRole role)
     : Factor({{pose, VarType::SE2}, {point, VarType::Point2}}, 2, role),
       measured_(measured),
+      information_(information),
       sqrtInfo_(sqrtInformation<2>(information)) {}
 
 void BearingRangeFactor2::evaluate(const double* const* x, double* r, double* const* J) const {

@@ -49,9 +49,11 @@ class BearingRangeFactor2 final : public Factor {
   std::unique_ptr<Factor> clone() const override;
   const char* typeName() const override { return "BearingRange2"; }
   const Vec2& measured() const { return measured_; }
+  const Eigen::Matrix2d& information() const { return information_; }
 
  private:
   Vec2 measured_;
+  Eigen::Matrix2d information_;
   Eigen::Matrix2d sqrtInfo_;
 };
 

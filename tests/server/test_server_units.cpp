@@ -871,6 +871,12 @@ TEST(ServerConfig, FlagsFileAndDefaults) {
   EXPECT_EQ(parseServerConfig({}).solver, defaultSolver());
   EXPECT_THROW(parseServerConfig({"--solver", "nope"}), std::invalid_argument);
   EXPECT_THROW(parseServerConfig({"--bogus", "1"}), std::invalid_argument);
+  // Rounds: at most 100 new poses of one robot per update unless told (0: no bound).
+  EXPECT_EQ(parseServerConfig({}).posesPerUpdate, 100);
+  EXPECT_EQ(parseServerConfig({"--poses-per-update", "0"}).posesPerUpdate, 0);
+  EXPECT_EQ(parseServerConfig({"--poses-per-update", "25"}).posesPerUpdate, 25);
+  EXPECT_THROW(parseServerConfig({"--poses-per-update", "-1"}), std::invalid_argument);
+  EXPECT_THROW(parseServerConfig({"--poses-per-update", "2.5"}), std::invalid_argument);
   EXPECT_EQ(effectiveLcmUrl("udpm://239.255.76.67:7667?ttl=0"),
             "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304");
   EXPECT_EQ(effectiveLcmUrl("memq://"), "memq://");

@@ -98,7 +98,7 @@ TEST(WireFactors, InterRobotBetweenGoesThroughBothAnchors) {
   const factor_t w = wireBetween2(1, 4, 2, 6, 0.5, 0.25, -0.3, factor_t::ROLE_LOOP_CLOSURE);
   EXPECT_TRUE(isInterRobot(w));
   const std::shared_ptr<Factor> built = buildFactor(w);
-  const std::shared_ptr<Factor> a = anchoredFactor(w, *built);
+  const std::shared_ptr<Factor> a = anchoredFactor(*built);
   ASSERT_EQ(a->size(), 4);
   EXPECT_TRUE(isAnchored(*a));
   EXPECT_EQ(a->role(), FactorRole::LoopClosure);
@@ -121,4 +121,51 @@ TEST(WireFactors, InterRobotBetweenGoesThroughBothAnchors) {
   EXPECT_GT(built->chi2(plain), 0.0);
   EXPECT_NEAR(a->chi2(anchored), built->chi2(plain), 1e-9);
   EXPECT_NEAR(se2Of(anchored, anchorKey(2)).theta, 0.7, 1e-15);
+}
+
+// A pose of robot 1 sighting robot 2's landmark: the same measurement through both anchors,
+// id and robust request kept, and an inter-robot edge that names the landmark.
+TEST(WireFactors, CrossRobotSightingGoesThroughBothAnchors) {
+  for (const bool bearingRange : {false, true}) {
+    const factor_t w =
+        bearingRange ? client::bearingRangeFactor(KeyRef::pose(1, 4), KeyRef::point(2, 7), 0.3, 5.0,
+                                                  Eigen::Matrix2d::Identity() * 50)
+                     : client::landmarkFactor(KeyRef::pose(1, 4), KeyRef::point(2, 7),
+                                              Eigen::Vector2d(1, 2), Eigen::Matrix2d::Identity());
+    EXPECT_TRUE(isCrossRobotSighting(w));
+    EXPECT_FALSE(isInterRobot(w));
+    const std::shared_ptr<Factor> built = buildFactor(w);
+    built->setId(42);
+    built->setRobustRequest({"dcs", 2.0});
+    const std::shared_ptr<Factor> a = anchoredFactor(*built);
+    ASSERT_EQ(a->size(), 4);
+    EXPECT_STREQ(a->typeName(), bearingRange ? "AnchoredBearingRange2" : "AnchoredPosePoint2");
+    EXPECT_EQ(a->role(), FactorRole::Landmark);
+    EXPECT_EQ(a->id(), 42u);
+    EXPECT_EQ(a->robustRequest().variant, "dcs");
+    EXPECT_EQ(a->key(0), anchorKey(1));
+    EXPECT_EQ(a->key(1), toKey(w.keys[0]));
+    EXPECT_EQ(a->key(2), anchorKey(2));
+    EXPECT_EQ(a->key(3), toKey(w.keys[1]));
+    // With both anchors at identity it is the plain sighting.
+    Values v;
+    v.insert(anchorKey(1), SE2());
+    v.insert(anchorKey(2), SE2());
+    v.insert(toKey(w.keys[0]), SE2(0.5, -1, 0.4));
+    v.insertPoint2(toKey(w.keys[1]), Vec2(3, 1));
+    EXPECT_NEAR(a->chi2(v), built->chi2(v), 1e-12);
+    EXPECT_GT(a->chi2(v), 0.0);
+    const InterEdge e = interEdgeOf(*a);
+    EXPECT_EQ(e.r, 1u);
+    EXPECT_EQ(e.s, 2u);
+    EXPECT_EQ(e.landmark, toKey(w.keys[1]));
+    EXPECT_EQ(e.needed, 2);
+  }
+  const factor_t same = client::landmarkFactor(KeyRef::pose(1, 4), KeyRef::point(1, 7),
+                                               Eigen::Vector2d(1, 2), Eigen::Matrix2d::Identity());
+  EXPECT_FALSE(isCrossRobotSighting(same));
+  EXPECT_EQ(interEdgeOf(*anchoredFactor(*buildFactor(wireBetween2(1, 4, 2, 6, 0.5, 0.25, -0.3,
+                                                                  factor_t::ROLE_LOOP_CLOSURE))))
+                .landmark,
+            0u);
 }

@@ -105,17 +105,103 @@ TEST(FeedOrder, OdometryJoinsNeighboursInIdOrder) {
   EXPECT_EQ(two.factor(ds.edges[2]).role, loopd::factor_t::ROLE_LOOP_CLOSURE);  // across robots
 }
 
-// Landmark 7 sighted from poses 2 and 4: one robot's, or (cut in two) two robots', which the
-// server cannot join through it (loopd-feed warns); a pose not fed sights nothing.
+// Adds a sighting of `landmark` from `pose`.
+void sight(io::Dataset& ds, std::int64_t pose, std::int64_t landmark) {
+  ds.edges.push_back(ds.edges[6]);
+  ds.edges.back().from = pose;
+  ds.edges.back().to = landmark;
+  ds.edges.back().index = static_cast<int>(ds.edges.size()) - 1;
+}
+
+// Landmark 7 sighted from poses 2 and 4: one robot's, or (cut in two) two robots', which then
+// share it (the second robot's sightings are cross-robot ones); a pose not fed sights nothing.
 TEST(FeedOrder, SaysWhichLandmarksMoreThanOneRobotSights) {
   io::Dataset ds = sixPoses();
-  ds.edges.push_back(ds.edges[6]);
-  ds.edges.back().from = 4;
-  ds.edges.back().index = static_cast<int>(ds.edges.size()) - 1;
+  sight(ds, 4, 7);
   EXPECT_TRUE(FeedOrder(ds, -1, 1, false).sharedLandmarks(ds).empty());
   EXPECT_EQ(FeedOrder(ds, -1, 2, false).sharedLandmarks(ds), (std::vector<std::int64_t>{7}));
   EXPECT_EQ(FeedOrder(ds, -1, 2, true).sharedLandmarks(ds), (std::vector<std::int64_t>{7}));
   EXPECT_TRUE(FeedOrder(ds, 4, 2, false).sharedLandmarks(ds).empty());  // pose 4 not fed
+}
+
+// Landmark 7 sighted from poses 4 and 2 (in that file order): it belongs to the robot whose
+// pose sights it first in feed order, and every sighting of it names that robot's landmark.
+TEST(FeedOrder, ALandmarkIsItsFirstSightersAndEverySightingSaysSo) {
+  io::Dataset ds = sixPoses();
+  ds.edges[6].from = 4;
+  sight(ds, 2, 7);
+  const io::Edge &from4 = ds.edges[6], &from2 = ds.edges[7];
+  // Robot 0: 0 1 2, robot 1: 3 4 5, in turn: pose 2 (robot 0) sights it first.
+  const FeedOrder inTurn(ds, -1, 2, false);
+  EXPECT_EQ(inTurn.landmarkOwner(7), 0);
+  EXPECT_EQ(name(inTurn.factor(from2, 10).keys[0]), "10 pose 2");
+  EXPECT_EQ(name(inTurn.factor(from2, 10).keys[1]), "10 landmark 7");
+  const loopd::factor_t across = inTurn.factor(from4, 10);  // robot 11's pose, 10's landmark
+  EXPECT_EQ(across.role, loopd::factor_t::ROLE_LANDMARK);
+  EXPECT_EQ(name(across.keys[0]), "11 pose 4");
+  EXPECT_EQ(name(across.keys[1]), "10 landmark 7");
+  EXPECT_LE(inTurn.dueAt(from2), inTurn.dueAt(from4));  // the owner's first goes out first
+  // Round-robin, 0 3 1 4 2 5: pose 4 (robot 1) sights it first.
+  const FeedOrder mixed(ds, -1, 2, true);
+  EXPECT_EQ(mixed.landmarkOwner(7), 1);
+  EXPECT_EQ(name(mixed.factor(from4).keys[0]), "1 pose 4");
+  EXPECT_EQ(name(mixed.factor(from4).keys[1]), "1 landmark 7");
+  EXPECT_EQ(name(mixed.factor(from2).keys[0]), "0 pose 2");
+  EXPECT_EQ(name(mixed.factor(from2).keys[1]), "1 landmark 7");
+  EXPECT_LT(mixed.dueAt(from4), mixed.dueAt(from2));
+  // One robot: its own, as before.
+  EXPECT_EQ(name(FeedOrder(ds, -1, 1, false).factor(from4).keys[1]), "0 landmark 7");
+  EXPECT_THROW(inTurn.landmarkOwner(8), std::out_of_range);  // nobody sights it
+}
+
+// Eight poses in two robots round-robin, 0 4 1 5 2 6 3 7; landmark 9 sighted from 4, 1 and 3.
+// With --poses 4 the first sighter (4) is not fed and does not count: the robots are 0 1 and
+// 2 3, fed 0 2 1 3, and pose 1 (robot 0) sights it first.
+TEST(FeedOrder, APoseNotFedOwnsNoLandmark) {
+  io::Dataset ds = sixPoses();
+  for (std::int64_t id : {6, 7}) ds.poses.push_back({io::VertexType::SE2, id});
+  ds.edges[6].from = 4;
+  ds.edges[6].to = 9;
+  sight(ds, 1, 9);
+  sight(ds, 3, 9);
+  const io::Edge &from1 = ds.edges[7], &from3 = ds.edges[8];
+  const FeedOrder all(ds, -1, 2, true);
+  EXPECT_EQ(all.poses(), (std::vector<std::int64_t>{0, 4, 1, 5, 2, 6, 3, 7}));
+  EXPECT_EQ(all.landmarkOwner(9), 1);
+  EXPECT_EQ(name(all.factor(from1).keys[0]), "0 pose 1");
+  EXPECT_EQ(name(all.factor(from1).keys[1]), "1 landmark 9");
+  EXPECT_EQ(name(all.factor(from3, 5).keys[1]), "6 landmark 9");
+  const FeedOrder four(ds, 4, 2, true);
+  EXPECT_EQ(four.poses(), (std::vector<std::int64_t>{0, 2, 1, 3}));
+  EXPECT_EQ(four.landmarkOwner(9), 0);
+  EXPECT_EQ(name(four.factor(from1).keys[1]), "0 landmark 9");
+  EXPECT_EQ(name(four.factor(from3).keys[0]), "1 pose 3");
+  EXPECT_EQ(name(four.factor(from3).keys[1]), "0 landmark 9");
+  EXPECT_EQ(four.sharedLandmarks(ds), (std::vector<std::int64_t>{9}));
+}
+
+// A HYPOTHESES group goes out whole at its last alternative's step (loopd-feed), so its
+// sightings count from there: robot 1's plain sighting of 7 from pose 3 is published before
+// the group {1 -> 7, 5 -> 8} (due with pose 5), and robot 1 owns 7 though pose 1 comes first.
+TEST(FeedOrder, AGroupsSightingsCountWhenTheGroupGoesOut) {
+  io::Dataset ds = sixPoses();
+  ds.edges[6].from = 3;  // plain: 3 -> 7
+  sight(ds, 1, 7);       // the group: 1 -> 7, 5 -> 8
+  sight(ds, 5, 8);
+  ds.hypotheses.push_back({7, 2, false, 9});
+  const FeedOrder inTurn(ds, -1, 2, false);  // robot 0: 0 1 2, robot 1: 3 4 5
+  EXPECT_EQ(inTurn.dueAt(ds, ds.hypotheses[0]), 5);
+  EXPECT_EQ(inTurn.landmarkOwner(7), 1);
+  EXPECT_EQ(name(inTurn.factor(ds.edges[7]).keys[0]), "0 pose 1");
+  EXPECT_EQ(name(inTurn.factor(ds.edges[7]).keys[1]), "1 landmark 7");
+  // --poses 5: the group (pose 5) never goes out, and its sightings count after all others.
+  const FeedOrder five(ds, 5, 2, false);  // robot 0: 0 1 2, robot 1: 3 4
+  EXPECT_EQ(five.dueAt(ds, ds.hypotheses[0]), -1);
+  EXPECT_EQ(five.landmarkOwner(7), 1);
+  EXPECT_THROW(five.landmarkOwner(8), std::out_of_range);
+  // Without the group, pose 1 (robot 0) is the first to sight 7.
+  ds.hypotheses.clear();
+  EXPECT_EQ(FeedOrder(ds, -1, 2, false).landmarkOwner(7), 0);
 }
 
 TEST(FeedOrder, AFileWithoutPosesIsRefused) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <utility>
 
 #include "solvers/problem/pose_graph_problem.h"
 #include "tools/common/edge_factor.h"
@@ -38,6 +39,35 @@ FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool i
     startsRobot_[i] = !started[r];
     started[r] = true;
   }
+  // Each landmark's owner: the robot of the pose whose sighting of it is published first, in
+  // loopd-feed's order: a sighting at its pose's step, one in a HYPOTHESES group at the
+  // group's (after every sent sighting if the group is not fed); at one step, the earlier
+  // pose's. Ownership going by that order, the owner's first sighting, which introduces the
+  // landmark to the server, is published no later than any other robot's sighting of it: the
+  // server never holds a batch for want of it. Without groups spanning poses, this is the
+  // robot of the first fed pose (in feed order) sighting the landmark, and a sighting due at
+  // the same step as the first is that pose's: the owner's own.
+  std::vector<long> groupStep(ds.edges.size(), -2);  // -2: in no group
+  for (const io::HypothesisGroup& g : ds.hypotheses) {
+    const long at = dueAt(ds, g);
+    for (int k = 0; k < g.count; ++k) groupStep.at(static_cast<size_t>(g.firstEdge + k)) = at;
+  }
+  std::unordered_map<std::int64_t, std::pair<long, long>> first;  // landmark → (step, rank)
+  for (size_t i = 0; i < ds.edges.size(); ++i) {
+    const io::Edge& e = ds.edges[i];
+    if (io::isBetween(e.type)) continue;
+    const auto pose = rank_.find(e.from);
+    if (pose == rank_.end()) continue;  // not fed: counts for nothing
+    const long rank = pose->second;
+    const long step = groupStep[i] == -2  ? rank
+                      : groupStep[i] >= 0 ? groupStep[i]
+                                          : static_cast<long>(n) + rank;
+    const auto [it, fresh] = first.emplace(e.to, std::make_pair(step, rank));
+    if (fresh || std::make_pair(step, rank) < it->second) {
+      it->second = {step, rank};
+      landmarkOwner_[e.to] = robotOf_.at(e.from);
+    }
+  }
 }
 
 long FeedOrder::dueAt(const io::Edge& e) const {
@@ -47,13 +77,26 @@ long FeedOrder::dueAt(const io::Edge& e) const {
   return std::max(a->second, b->second);
 }
 
+long FeedOrder::dueAt(const io::Dataset& ds, const io::HypothesisGroup& g) const {
+  long at = 0;
+  for (int k = 0; k < g.count; ++k) {
+    const long d = dueAt(ds.edges.at(static_cast<size_t>(g.firstEdge + k)));
+    if (d < 0) return -1;
+    at = std::max(at, d);
+  }
+  return at;
+}
+
 loopd::factor_t FeedOrder::factor(const io::Edge& e, int robotOffset) const {
   const int from = robotOf(e.from);
   const int to = io::isBetween(e.type) ? robotOf(e.to) : from;
   // Odometry: one robot's poses next to each other in id order (as loopd-solve reads files).
   const bool odometry =
       io::isBetween(e.type) && from == to && neighboursInIdOrder(sortedIds_, e.from, e.to);
-  return edgeFactor(e, from + robotOffset, to + robotOffset, odometry);
+  loopd::factor_t f = edgeFactor(e, from + robotOffset, to + robotOffset, odometry);
+  // A sighting names its landmark's owner: the pose's robot, or another (cross-robot).
+  if (!io::isBetween(e.type)) f.keys.at(1).robot = landmarkOwner(e.to) + robotOffset;
+  return f;
 }
 
 loopd::factor_t FeedOrder::equivalenceFactor(const io::Edge& e, int robotOffset) const {

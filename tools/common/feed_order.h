@@ -2,7 +2,8 @@
 // The order in which a dataset's poses are played to a server (loopd-feed, the server
 // benchmarks): by id, optionally only the first N; cut into consecutive segments, one robot
 // each; one segment after the other or round-robin over the robots. An edge is due at the
-// step its last pose appears.
+// step its last pose appears. Each landmark belongs to one robot, the one whose sighting of it
+// is published first; every robot's sightings of it go to that robot's landmark.
 #include <cstdint>
 #include <unordered_map>
 #include <vector>
@@ -27,14 +28,24 @@ class FeedOrder {
   /// The step (index into poses()) an edge is due at: its last end's, a sighting's pose's;
   /// -1 when an end is not fed.
   long dueAt(const io::Edge& e) const;
-  /// The edge as the wire's factor_t in its robots' frames, robot ids + robotOffset.
+  /// The step a HYPOTHESES group of `ds` is due at (loopd-feed sends it whole): its last
+  /// alternative's; -1 when an alternative is not fed.
+  long dueAt(const io::Dataset& ds, const io::HypothesisGroup& g) const;
+  /// The edge as the wire's factor_t in its robots' frames, robot ids + robotOffset. A
+  /// sighting names its pose's robot and its landmark's owner (landmarkOwner), which may be
+  /// another robot: a cross-robot sighting.
   loopd::factor_t factor(const io::Edge& e, int robotOffset = 0) const;
   /// An EQUIV pair's edge (io::equivalenceEdge), trusted as loopd-solve trusts it: odometry
   /// within one robot, a loop closure with robust "none" (never down-weighted) across two.
   loopd::factor_t equivalenceFactor(const io::Edge& e, int robotOffset = 0) const;
-  /// The landmarks (file ids, ascending) that fed poses of more than one robot sight. The
-  /// server takes no cross-robot sightings yet, so each robot's sightings of such a landmark
-  /// go to a landmark of its own, and the robots share no constraint through it.
+  /// 0-based robot owning a landmark (file id): the robot of the fed pose whose sighting of it
+  /// is published first, i.e. the first in feed order (a sighting in a HYPOTHESES group counts
+  /// at its group's step, one in a group never sent after all others); its landmark key is
+  /// the one every robot's sightings name. Throws std::out_of_range when no fed pose sights it.
+  int landmarkOwner(std::int64_t landmarkId) const { return landmarkOwner_.at(landmarkId); }
+  /// The landmarks (file ids, ascending) that fed poses of more than one robot sight. The other
+  /// robots' sightings of one go to its owner's landmark (cross-robot sightings), which ties
+  /// the robots' frames together.
   std::vector<std::int64_t> sharedLandmarks(const io::Dataset& ds) const;
 
  private:
@@ -44,6 +55,7 @@ class FeedOrder {
   std::unordered_map<std::int64_t, long> rank_;
   std::vector<std::int64_t> sortedIds_;  // the fed poses' ids, ascending
   std::vector<bool> startsRobot_;
+  std::unordered_map<std::int64_t, int> landmarkOwner_;
 };
 
 }  // namespace loopd::tools

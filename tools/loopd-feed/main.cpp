@@ -11,6 +11,10 @@
 // file edge indices. Edges between consecutive ids of one robot are odometry; every other edge
 // (including those crossing segments) is a loop closure. A robot's first pose is sent with the
 // initial value identity (its own frame); the server composes the others from odometry.
+// A landmark belongs to the robot whose pose sights it first in feed order
+// (FeedOrder::landmarkOwner): every robot's sightings of it name that robot's landmark, so
+// another robot's are cross-robot sightings, published after the owner's first, and tie the
+// robots' frames together.
 // TORO EQUIV pairs go as trusted identity constraints (FeedOrder::equivalenceFactor), ids
 // following the edges' as in loopd-solve (TORO has no HYPOTHESES: no group id is taken).
 // The k-th batch of a sender has sequence k, so feeding the same file again is a resend.
@@ -121,12 +125,11 @@ int run(const Options& o) {
   io::Dataset ds = io::readDataset(o.dataset);
   const tools::FeedOrder feed(ds, o.poses, o.robots, o.interleave);
   const std::vector<std::int64_t> shared = feed.sharedLandmarks(ds);
-  if (!shared.empty())
+  if (!shared.empty() && !o.quiet)
     std::fprintf(stderr,
-                 "loopd-feed: warning: %zu landmarks (first: %lld) are sighted by more than one "
-                 "robot; the server takes no cross-robot sightings yet, so each robot sends its "
-                 "sightings to a landmark of its own, and the robots share no constraint "
-                 "through them\n",
+                 "loopd-feed: %zu landmarks (first: %lld) are sighted by more than one robot: "
+                 "their sightings go to the first robot's landmark, which ties the robots' "
+                 "frames together\n",
                  shared.size(), static_cast<long long>(shared.front()));
   const std::vector<std::int64_t>& order = feed.poses();
   const size_t n = order.size();
@@ -138,12 +141,8 @@ int run(const Options& o) {
   size_t skipped = 0;
   std::vector<char> inGroup(ds.edges.size(), 0);
   for (const io::HypothesisGroup& g : ds.hypotheses) {
-    long at = 0;
-    for (int k = 0; k < g.count; ++k) {
-      inGroup[static_cast<size_t>(g.firstEdge + k)] = 1;
-      const long d = feed.dueAt(ds.edges[static_cast<size_t>(g.firstEdge + k)]);
-      at = (d < 0 || at < 0) ? -1 : std::max(at, d);
-    }
+    for (int k = 0; k < g.count; ++k) inGroup[static_cast<size_t>(g.firstEdge + k)] = 1;
+    const long at = feed.dueAt(ds, g);  // as FeedOrder counts it for landmark owners
     if (at < 0)
       skipped += static_cast<size_t>(g.count);
     else

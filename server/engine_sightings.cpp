@@ -1,0 +1,124 @@
+// Cross-robot landmark sightings (engine.h): a pose of robot r sighting a landmark of robot s
+// relates r's frame to s's. Through the robots' anchors it is an ordinary factor once the two
+// frames are joined. A sighting cannot join them alone (one point leaves the rotation between
+// the frames free, and the solver would meet a singular system), so a pair's sightings are
+// kept back until another factor joins the frames or they reach enough distinct landmarks to
+// fix the transform (frame_groups.h); the newcomer's anchor then starts at the least-squares
+// alignment of the landmarks as each robot places them (frame_alignment.h).
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "server/engine.h"
+#include "server/frame_alignment.h"
+#include "server/frame_groups.h"
+#include "solvers/factors/landmark_factors.h"
+
+namespace loopd::server {
+
+namespace {
+
+// Where the sighting factor puts its landmark in its pose's frame.
+Vec2 sightedPoint2(const Factor& f) {
+  if (const auto* p = dynamic_cast<const PosePointFactor2*>(&f)) return p->measured();
+  const Vec2& br = static_cast<const BearingRangeFactor2&>(f).measured();
+  return Vec2(br[1] * std::cos(br[0]), br[1] * std::sin(br[0]));
+}
+
+}  // namespace
+
+void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings,
+                            const Values& batchValues, Staged& st) {
+  for (const auto& [f, owner] : sightings) {
+    const std::uint32_t r = keyRobot(f->key(0)), s = keyRobot(f->key(1));
+    std::vector<PendingSighting>& list = pending_[std::minmax(r, s)];
+    if (list.empty())
+      spdlog::debug("robot {} sights {}: kept back until robots {} and {} share a frame", r,
+                    keyToString(f->key(1)), r, s);
+    list.push_back({f, owner});
+  }
+  auto valueSlot = [&](Key k) -> std::pair<const Values*, int> {
+    const Values* v = batchValues.contains(k) ? &batchValues : holder(k);
+    return {v, v->slot(k)};
+  };
+  for (auto it = pending_.begin(); it != pending_.end();) {
+    const auto [a, b] = it->first;
+    const std::map<std::uint32_t, std::uint32_t> groups = frameGroupsOf(currentInterEdges(&st));
+    auto groupOf = [&](std::uint32_t r) {
+      const auto g = groups.find(r);
+      return g == groups.end() ? r : g->second;
+    };
+    if (groupOf(a) != groupOf(b)) {
+      if (!robots_.count(a) || !robots_.count(b)) {
+        ++it;
+        continue;
+      }
+      // The landmarks as each robot places them: b's frame in a's aligns them. Repeat
+      // sightings of one landmark are several points on one side but one on the other: the
+      // count of distinct landmarks decides, as frameGroupsOf decides.
+      const bool se3 = robots_.at(a).poseType == VarType::SE3;
+      std::set<Key> distinct;
+      for (const PendingSighting& p : it->second) distinct.insert(p.factor->key(1));
+      if (static_cast<int>(distinct.size()) < (se3 ? 3 : 2)) {
+        ++it;
+        continue;
+      }
+      std::vector<PointPair2> pairs2;
+      std::vector<PointPair3> pairs3;
+      for (const PendingSighting& p : it->second) {
+        const Factor& f = *p.factor;
+        const auto [pv, ps] = valueSlot(f.key(0));
+        const auto [lv, ls] = valueSlot(f.key(1));
+        const bool poseOfA = keyRobot(f.key(0)) == a;
+        if (se3) {
+          const Vec3 seen =
+              pv->se3(ps).transform(static_cast<const PosePointFactor3&>(f).measured());
+          const Vec3 landmark = lv->point3(ls);
+          pairs3.push_back(poseOfA ? PointPair3{landmark, seen} : PointPair3{seen, landmark});
+        } else {
+          const Vec2 seen = pv->se2(ps).transform(sightedPoint2(f));
+          const Vec2 landmark = lv->point2(ls);
+          pairs2.push_back(poseOfA ? PointPair2{landmark, seen} : PointPair2{seen, landmark});
+        }
+      }
+      SE2 m2;
+      SE3 m3;
+      bool fixed = false;
+      if (se3) {
+        if (const auto m = alignFrames(pairs3)) m3 = *m, fixed = true;
+      } else if (const auto m = alignFrames(pairs2)) {
+        m2 = *m;
+        fixed = true;
+      }
+      if (!fixed) {
+        ++it;
+        continue;
+      }
+      spdlog::info("robots {} and {}: {} landmark sightings fix their frames; joining them", a, b,
+                   it->second.size());
+      joinRobots(a, b, m2, m3, st);
+    }
+    for (const PendingSighting& p : it->second) {
+      st.update.factors.push_back(anchoredFactor(*p.factor));
+      st.owners.push_back(p.owner);
+    }
+    it = pending_.erase(it);
+  }
+}
+
+bool Engine::dropPendingSighting(FactorId id) {
+  for (auto it = pending_.begin(); it != pending_.end(); ++it) {
+    auto& list = it->second;
+    const auto at = std::find_if(list.begin(), list.end(),
+                                 [&](const PendingSighting& p) { return p.factor->id() == id; });
+    if (at == list.end()) continue;
+    list.erase(at);
+    if (list.empty()) pending_.erase(it);
+    return true;
+  }
+  return false;
+}
+
+}  // namespace loopd::server

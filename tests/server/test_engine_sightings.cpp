@@ -1,0 +1,317 @@
+// Cross-robot landmark sightings through the engine (server/engine_sightings.cpp): a pose of
+// robot 1 sighting robot 0's landmarks. Before, the validator refused them ("not supported
+// yet"), and robots that shared only landmarks never shared a frame.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <vector>
+
+#include "tests/server/engine_harness.h"
+
+namespace loopd {
+namespace {
+
+using client::FactorPublisher;
+using client::KeyRef;
+using test::EngineHarness;
+
+const Eigen::Matrix2d kInfo2 = Eigen::Matrix2d::Identity() * 100;
+const Eigen::Matrix3d kInfoPose2 = Eigen::Vector3d(100, 100, 1000).asDiagonal();
+
+// The world: robot 0 starts at the origin (its frame is the common one), robot 1 at T1 (its
+// own frame puts its first pose at the origin). Landmarks L0..L3 belong to robot 0.
+struct World2 {
+  SE2 T1;
+  std::vector<Vec2> landmarks = {{2, 3}, {5, -2}, {-1, 4}, {4, 6}};
+  SE2 robot0(int i) const { return SE2(i * 1.0, 0.0, 0.05 * i); }  // in the world
+  SE2 odometry1() const { return SE2(0.8, 0.1, -0.1); }
+  SE2 robot1Own(int j) const {
+    SE2 x;
+    for (int k = 0; k < j; ++k) x = x * odometry1();
+    return x;
+  }
+  SE2 robot1(int j) const { return T1 * robot1Own(j); }
+};
+
+client::Pose2 pose2(const SE2& x) { return {x.x, x.y, x.theta}; }
+
+struct TwoRobots {
+  EngineHarness h;
+  FactorPublisher r0, r1;
+  World2 w;
+  bool bearingRange = false;
+  explicit TwoRobots(double theta1, bool bearing = false, const char* solver = "isam2")
+      : h(solver),
+        r0([this](const std::string&, const std::vector<std::uint8_t>& b) { h.sendRaw(b); }, "r0",
+           "T_FACTORS"),
+        r1([this](const std::string&, const std::vector<std::uint8_t>& b) { h.sendRaw(b); }, "r1",
+           "T_FACTORS"),
+        bearingRange(bearing) {
+    w.T1 = SE2(3, 4, theta1);
+  }
+  // A sighting of robot 0's landmark l from robot `robot`'s pose i; returns its id.
+  std::int64_t sight(FactorPublisher& p, int robot, int i, int l) {
+    const SE2 x = robot == 0 ? w.robot0(i) : w.robot1(i);
+    const Vec2 z = x.transformTo(w.landmarks[static_cast<size_t>(l)]);
+    if (bearingRange)
+      return p.bearingRange(KeyRef::pose(robot, i), KeyRef::point(0, l), std::atan2(z.y(), z.x()),
+                            z.norm(), kInfo2);
+    return p.landmark(KeyRef::pose(robot, i), KeyRef::point(0, l), Eigen::Vector2d(z), kInfo2);
+  }
+  // Robot 0 walks poses 0..5 and sights every landmark from its first and last pose; robot 1
+  // walks its poses 0..5.
+  void walk() {
+    for (int i = 0; i < 5; ++i) {
+      r0.odometry(0, i, i + 1, pose2(w.robot0(i).between(w.robot0(i + 1))), kInfoPose2);
+      if (i == 0)
+        for (int l = 0; l < 4; ++l) sight(r0, 0, 0, l);
+      r0.flush();
+    }
+    for (int l = 0; l < 4; ++l) sight(r0, 0, 5, l);
+    r0.flush();
+    for (int j = 0; j < 5; ++j) {
+      r1.odometry(1, j, j + 1, pose2(w.odometry1()), kInfoPose2);
+      r1.flush();
+    }
+  }
+  int anchoredFactors() const {
+    int n = 0;
+    for (const auto& f : h.engine.backend().graph().factors()) n += f->size() == 4;
+    return n;
+  }
+  // Robot 1's poses and robot 0's landmarks, as published, against the world.
+  void expectWorld(double tol) const {
+    for (int j = 0; j <= 5; ++j) {
+      std::vector<double> x;
+      ASSERT_TRUE(h.engine.commonFramePose(poseKey(static_cast<std::uint64_t>(j), 1), x));
+      const SE2 truth = w.robot1(j);
+      EXPECT_NEAR(x[0], truth.x, tol) << j;
+      EXPECT_NEAR(x[1], truth.y, tol) << j;
+      EXPECT_NEAR(std::remainder(x[2] - truth.theta, 2 * M_PI), 0.0, tol) << j;
+    }
+    for (int l = 0; l < 4; ++l) {
+      std::vector<double> p;
+      ASSERT_TRUE(h.engine.commonFramePose(landmarkKey(static_cast<std::uint64_t>(l), 0), p));
+      EXPECT_NEAR(p[0], w.landmarks[static_cast<size_t>(l)].x(), tol) << l;
+      EXPECT_NEAR(p[1], w.landmarks[static_cast<size_t>(l)].y(), tol) << l;
+    }
+  }
+  std::string firstError() const { return h.out.errors.empty() ? "" : h.out.errors.front().reason; }
+};
+
+// One landmark leaves the rotation between the frames free: robot 1's sightings of it wait.
+// A second landmark fixes the frames; the join starts at the landmarks' alignment, so even a
+// half-turn between the frames lands on the world exactly.
+void joinsOnTheSecondLandmark(double theta1, bool bearingRange) {
+  TwoRobots t(theta1, bearingRange);
+  t.walk();
+  t.sight(t.r1, 1, 2, 0);
+  t.r1.flush();
+  t.sight(t.r1, 1, 4, 0);  // the same landmark again
+  t.r1.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_FALSE(t.h.engine.robotJoined(1));
+  EXPECT_EQ(t.anchoredFactors(), 0);
+  EXPECT_EQ(t.h.out.statuses.back().robots_in_common_frame, 0);
+  t.sight(t.r1, 1, 3, 1);
+  t.r1.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_TRUE(t.h.engine.robotJoined(0));
+  EXPECT_TRUE(t.h.engine.robotJoined(1));
+  EXPECT_EQ(t.anchoredFactors(), 3);
+  EXPECT_EQ(t.h.out.statuses.back().robots_in_common_frame, 2);
+  EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
+  t.expectWorld(1e-6);
+  // Later sightings go straight in.
+  t.sight(t.r1, 1, 5, 2);
+  t.r1.flush();
+  EXPECT_EQ(t.anchoredFactors(), 4);
+  EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
+}
+
+TEST(EngineSightings, PosePointSightingsJoinTwoRobotsOnTheSecondLandmark) {
+  joinsOnTheSecondLandmark(1.2, false);
+}
+
+TEST(EngineSightings, AHalfTurnBetweenTheFramesIsFoundByTheAlignment) {
+  joinsOnTheSecondLandmark(3.0, false);
+  joinsOnTheSecondLandmark(-2.9, false);
+}
+
+TEST(EngineSightings, BearingRangeSightingsJoinTwoRobots) { joinsOnTheSecondLandmark(2.5, true); }
+
+// Noisy sightings: the joined graph is the single-frame problem, so its optimum is the one of
+// the same measurements solved by lm in one frame (robot 1's poses in the world).
+TEST(EngineSightings, TheJoinedOptimumIsTheSingleFrameOne) {
+  TwoRobots t(2.0, false, "lm");
+  t.walk();
+  const double nx[3] = {0.03, -0.02, 0.05}, ny[3] = {-0.01, 0.04, -0.03};
+  for (int k = 0; k < 3; ++k) {
+    const SE2 x = t.w.robot1(k + 2);
+    const Vec2 z = x.transformTo(t.w.landmarks[static_cast<size_t>(k)]) + Vec2(nx[k], ny[k]);
+    t.r1.landmark(KeyRef::pose(1, k + 2), KeyRef::point(0, k), Eigen::Vector2d(z), kInfo2);
+    t.r1.flush();
+  }
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  ASSERT_TRUE(t.h.engine.robotJoined(1));
+  const double joined = t.h.engine.backend().chi2();
+  EXPECT_GT(joined, 0.01);  // the noise does not fit exactly
+  // The same measurements as one robot's graph in one frame: robot 1's poses 100+j.
+  EngineHarness one("lm");
+  FactorPublisher p([&](const std::string&, const std::vector<std::uint8_t>& b) { one.sendRaw(b); },
+                    "one", "T_FACTORS");
+  const World2& w = t.w;
+  for (int i = 0; i < 5; ++i) {
+    p.odometry(0, i, i + 1, pose2(w.robot0(i).between(w.robot0(i + 1))), kInfoPose2);
+    if (i == 0)
+      for (int l = 0; l < 4; ++l)
+        p.landmark(KeyRef::pose(0, 0), KeyRef::point(0, l),
+                   Eigen::Vector2d(w.robot0(0).transformTo(w.landmarks[static_cast<size_t>(l)])),
+                   kInfo2);
+    p.flush();
+  }
+  for (int l = 0; l < 4; ++l)
+    p.landmark(KeyRef::pose(0, 5), KeyRef::point(0, l),
+               Eigen::Vector2d(w.robot0(5).transformTo(w.landmarks[static_cast<size_t>(l)])),
+               kInfo2);
+  p.flush();
+  // Robot 1's walk hangs off its first sighting: start it at its true pose, unconstrained.
+  p.initialValue(KeyRef::pose(0, 100), pose2(w.robot1(0)));
+  for (int j = 0; j < 5; ++j) p.odometry(0, 100 + j, 101 + j, pose2(w.odometry1()), kInfoPose2);
+  for (int k = 0; k < 3; ++k) {
+    const Vec2 z =
+        w.robot1(k + 2).transformTo(w.landmarks[static_cast<size_t>(k)]) + Vec2(nx[k], ny[k]);
+    p.landmark(KeyRef::pose(0, 102 + k), KeyRef::point(0, k), Eigen::Vector2d(z), kInfo2);
+  }
+  p.flush();
+  EXPECT_TRUE(one.out.errors.empty()) << one.out.errors.front().reason;
+  EXPECT_NEAR(joined, one.engine.backend().chi2(), 1e-9 + 1e-6 * joined);
+}
+
+// A sighting removed while it waits is gone: it never counts towards the join.
+TEST(EngineSightings, ASightingRemovedWhileItWaitsDoesNotCount) {
+  TwoRobots t(1.0);
+  t.walk();
+  const std::int64_t first = t.sight(t.r1, 1, 2, 0);
+  t.r1.flush();
+  t.r1.remove(first);
+  t.r1.flush();
+  t.sight(t.r1, 1, 3, 1);
+  t.r1.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_FALSE(t.h.engine.robotJoined(1));  // only landmark 1 is left
+  t.sight(t.r1, 1, 4, 2);
+  t.r1.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_TRUE(t.h.engine.robotJoined(1));
+  EXPECT_EQ(t.anchoredFactors(), 2);
+  t.expectWorld(1e-6);
+}
+
+// Frames joined by a loop closure take a single sighting at once, and the ones waiting go in
+// with the closure.
+TEST(EngineSightings, AClosureJoinsTheFramesAndTheWaitingSightingsGoIn) {
+  TwoRobots t(0.7);
+  t.walk();
+  t.sight(t.r1, 1, 2, 0);
+  t.r1.flush();
+  EXPECT_EQ(t.anchoredFactors(), 0);
+  t.r1.loopClosure(KeyRef::pose(0, 2), KeyRef::pose(1, 1),
+                   pose2(t.w.robot0(2).between(t.w.robot1(1))), kInfoPose2);
+  t.r1.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_EQ(t.anchoredFactors(), 2);  // the closure and the sighting
+  t.sight(t.r1, 1, 3, 1);
+  t.r1.flush();
+  EXPECT_EQ(t.anchoredFactors(), 3);
+  EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
+  t.expectWorld(1e-6);
+}
+
+// A sighting of a landmark its owner has not introduced yet waits for it.
+TEST(EngineSightings, ASightingOfALandmarkNotIntroducedYetIsHeld) {
+  TwoRobots t(1.0);
+  t.walk();
+  t.r1.landmark(KeyRef::pose(1, 2), KeyRef::point(0, 9), Eigen::Vector2d(1, 1), kInfo2);
+  t.r1.flush();
+  EXPECT_EQ(t.h.out.statuses.back().batches_held, 1);
+  t.r0.landmark(KeyRef::pose(0, 5), KeyRef::point(0, 9), Eigen::Vector2d(2, 2), kInfo2);
+  t.r0.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_EQ(t.h.out.statuses.back().batches_held, 0);
+  EXPECT_TRUE(t.h.engine.backend().estimate().contains(landmarkKey(9, 0)));
+}
+
+// Removing sightings until one landmark is left splits the frames again: robot 1's group gets
+// a root prior (the graph stays well posed) and goes on taking its own factors.
+TEST(EngineSightings, RemovingSightingsDownToOneLandmarkRerootsTheRobot) {
+  TwoRobots t(1.0);
+  t.walk();
+  t.sight(t.r1, 1, 2, 0);
+  const std::int64_t second = t.sight(t.r1, 1, 3, 1);
+  t.r1.flush();
+  ASSERT_EQ(t.anchoredFactors(), 2);
+  const int before = t.h.engine.backend().graph().size();
+  t.r1.remove(second);
+  t.r1.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_EQ(t.anchoredFactors(), 1);
+  EXPECT_EQ(t.h.engine.backend().graph().size(), before);  // one sighting out, a root prior in
+  t.r1.odometry(1, 5, 6, pose2(t.w.odometry1()), kInfoPose2);
+  t.r1.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
+}
+
+// 3D: two landmarks leave the rotation about the line through them free; the third fixes it.
+TEST(EngineSightings, ThreeDimensionalSightingsJoinOnTheThirdLandmark) {
+  EngineHarness h("isam2");
+  auto sink = [&](const std::string&, const std::vector<std::uint8_t>& b) { h.sendRaw(b); };
+  FactorPublisher r0(sink, "r0", "T_FACTORS"), r1(sink, "r1", "T_FACTORS");
+  const Mat6 info = Mat6::Identity() * 100;
+  const Eigen::Matrix3d infoP = Eigen::Matrix3d::Identity() * 100;
+  const std::vector<Vec3> L = {{2, 3, 1}, {5, -2, 0.5}, {-1, 4, 2}, {4, 6, -1}};
+  auto pose3 = [](const SE3& x) {
+    client::Pose3 p;
+    p.t = x.t;
+    p.q = Eigen::Quaterniond(x.R);
+    return p;
+  };
+  const SE3 step(Eigen::AngleAxisd(0.1, Vec3(0.2, 0.3, 1).normalized()).toRotationMatrix(),
+                 Vec3(1, 0.1, 0.05));
+  const SE3 T1(Eigen::AngleAxisd(2.6, Vec3(1, -2, 0.5).normalized()).toRotationMatrix(),
+               Vec3(3, 4, -1));
+  auto robot0 = [&](int i) {
+    SE3 x;
+    for (int k = 0; k < i; ++k) x = x * step;
+    return x;
+  };
+  auto robot1 = [&](int j) { return T1 * robot0(j); };
+  for (int i = 0; i < 4; ++i) {
+    r0.odometry(0, i, i + 1, pose3(step), info);
+    if (i == 0)
+      for (int l = 0; l < 4; ++l)
+        r0.landmark(KeyRef::pose(0, 0), KeyRef::point(0, l),
+                    Eigen::Vector3d(L[static_cast<size_t>(l)]), infoP);
+    r0.flush();
+    r1.odometry(1, i, i + 1, pose3(step), info);
+    r1.flush();
+  }
+  for (int l = 0; l < 3; ++l) {
+    r1.landmark(KeyRef::pose(1, l + 1), KeyRef::point(0, l),
+                Eigen::Vector3d(robot1(l + 1).transformTo(L[static_cast<size_t>(l)])), infoP);
+    r1.flush();
+    EXPECT_EQ(h.engine.robotJoined(1), l == 2) << l;
+  }
+  EXPECT_TRUE(h.out.errors.empty()) << h.out.errors.front().reason;
+  EXPECT_LT(h.engine.backend().chi2(), 1e-9);
+  for (int j = 0; j <= 4; ++j) {
+    std::vector<double> x;
+    ASSERT_TRUE(h.engine.commonFramePose(poseKey(static_cast<std::uint64_t>(j), 1), x));
+    EXPECT_NEAR((Vec3(x[0], x[1], x[2]) - robot1(j).t).norm(), 0.0, 1e-6) << j;
+  }
+}
+
+}  // namespace
+}  // namespace loopd
