@@ -380,6 +380,42 @@ TEST(EngineCommands, SnapshotOfSeveralRobotsReadsBackAsTheSameGraph) {
   EXPECT_NEAR(testing_live::statsChi2(stats), serverChi2, 1e-4 * serverChi2);
 }
 
+// Cross-robot sightings are written as the sightings of their common-frame landmarks; one
+// kept back (its robots' frames not joined yet) is counted in the trailer, not written.
+TEST(EngineCommands, SnapshotWritesCrossRobotSightingsAndCountsThoseKeptBack) {
+  Fixture f;
+  twoRobotsWithLandmarks(f);
+  // Each robot sights the other's landmark (their frames are joined by the closures).
+  f.send(batch("b", ++f.seq1, {landmark2(103, 1, 12, 0, 3, 0.4, -8.2)}));
+  f.send(batch("a", ++f.seq0, {landmark2(61, 0, 2, 1, 7, -1.5, 11.2)}));
+  // Robot 2, on its own, sights robot 0's landmark: kept back.
+  std::int64_t seq2 = 0;
+  f.send(batch("c", ++seq2, {between2(0, 2, 0, 2, 1, {1, 0, 0})}));
+  f.send(batch("c", ++seq2, {landmark2(1, 2, 1, 0, 3, 2, 2)}));
+  ASSERT_TRUE(f.out.errors.empty()) << f.out.errors.front().reason;
+  f.command(C::OPTIMIZE, "", {}, 1);
+  const std::string path = testing_live::tmp("snap_cross.g2o");
+  const auto m = f.mark();
+  f.command(C::SAVE_SNAPSHOT, path, {}, 6);
+  ASSERT_EQ(f.out.errors.size(), m.errors) << f.out.errors.back().reason;
+  const std::string text = fileText(path);
+  EXPECT_NE(text.find("# not written: 1 cross-robot sightings, kept back until their robots "
+                      "share a frame\n"),
+            std::string::npos)
+      << text;
+  io::Dataset ds;
+  ASSERT_NO_THROW(ds = io::readDataset(path)) << text;
+  // 11 edges as before, the two cross-robot sightings and robot 2's odometry.
+  EXPECT_EQ(ds.edges.size(), 14u);
+  int sightings = 0;
+  for (const auto& e : ds.edges) sightings += !io::isBetween(e.type);
+  EXPECT_EQ(sightings, 5);
+  const PoseGraphProblem p = buildProblem(ds);
+  const double serverChi2 = f.engine.backend().chi2();
+  EXPECT_GT(serverChi2, 0.1);
+  EXPECT_NEAR(p.graph.chi2(p.initial), serverChi2, 1e-6 * serverChi2);
+}
+
 TEST(EngineCommands, SnapshotSkipsWhatG2oCannotExpressAndSaysSo) {
   Fixture f;
   std::vector<factor_t> a;
