@@ -2,6 +2,7 @@
 // numbers, ids, roles, robots), its determinism, and loopd-listen's files against a live server.
 #include <lcm/lcm-cpp.hpp>
 
+#include <cstdlib>
 #include <fstream>
 #include <map>
 #include <set>
@@ -38,7 +39,7 @@ TEST(LoopdFeed, LogHasOneBatchPerPoseNumberedPerSender) {
   ASSERT_EQ(batches.size(), 1728u);
   std::map<std::string, int64_t> lastSeq;
   std::set<int64_t> ids;
-  int inter = 0, odometry = 0;
+  int inter = 0, odometry = 0, trusted = 0;
   for (const auto& b : batches) {
     EXPECT_EQ(b.sequence, ++lastSeq[b.sender]) << b.sender;
     for (const auto& f : b.factors) {
@@ -46,6 +47,10 @@ TEST(LoopdFeed, LogHasOneBatchPerPoseNumberedPerSender) {
       if (f.keys[0].robot != f.keys[1].robot) {
         ++inter;
         EXPECT_EQ(f.role, factor_t::ROLE_LOOP_CLOSURE);
+        // The boundary's odometry (neighbouring ids) is trusted; real closures are not.
+        const bool boundary = std::abs(f.keys[0].index - f.keys[1].index) == 1;
+        EXPECT_EQ(f.robust, boundary ? "none" : "") << f.keys[0].index << "-" << f.keys[1].index;
+        trusted += boundary;
       }
       odometry += f.role == factor_t::ROLE_ODOMETRY;
       EXPECT_EQ(f.keys[0].robot, f.keys[0].index * 3 / 1728);  // consecutive segments, file ids
@@ -57,6 +62,7 @@ TEST(LoopdFeed, LogHasOneBatchPerPoseNumberedPerSender) {
   EXPECT_EQ(*ids.rbegin(), 2511);
   EXPECT_GT(inter, 2);
   EXPECT_EQ(odometry, 1727 - 2);  // the two segment boundaries are inter-robot closures
+  EXPECT_EQ(trusted, 2);
   // Each robot's first pose comes with an initial value (its own frame's origin).
   int initial = 0;
   for (const auto& b : batches) initial += b.num_initial_values;
@@ -97,14 +103,17 @@ TEST(LoopdFeed, OtherRobotsSightingsNameTheFirstSightersLandmark) {
         if (f.role != factor_t::ROLE_LANDMARK) continue;
         const int64_t landmark = f.keys[1].index;
         const auto [it, fresh] = owner.emplace(landmark, f.keys[1].robot);
-        if (fresh)
+        if (fresh) {
           EXPECT_EQ(f.keys[0].robot, f.keys[1].robot) << "landmark " << landmark;
-        else
+        } else {
           EXPECT_EQ(f.keys[1].robot, it->second) << "landmark " << landmark;
+        }
         if (f.keys[0].robot != f.keys[1].robot) {
           ++across;
           shared.insert(landmark);
-          if (!interleave) EXPECT_EQ(f.keys[1].robot, 0);  // robot 0's poses all come first
+          if (!interleave) {
+            EXPECT_EQ(f.keys[1].robot, 0);  // robot 0's poses all come first
+          }
         }
       }
     EXPECT_EQ(shared.size(), 66u);

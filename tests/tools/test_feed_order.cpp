@@ -83,7 +83,11 @@ TEST(FeedOrder, FactorsNameTheirRobotsFrames) {
   ASSERT_EQ(across.keys.size(), 2u);
   EXPECT_EQ(name(across.keys[0]), "10 pose 2");
   EXPECT_EQ(name(across.keys[1]), "11 pose 3");
+  // The boundary's odometry goes as a closure, trusted as loopd-solve trusts odometry.
+  EXPECT_EQ(across.robust, "none");
   EXPECT_EQ(inTurn.factor(ds.edges[3]).role, loopd::factor_t::ROLE_ODOMETRY);
+  EXPECT_EQ(inTurn.factor(ds.edges[3]).robust, "");
+  EXPECT_EQ(inTurn.factor(ds.edges[5]).robust, "");  // a closure: 4 -> 1
   const loopd::factor_t sighting = inTurn.factor(ds.edges[6]);
   EXPECT_EQ(name(sighting.keys[1]), "0 landmark 7");
 }

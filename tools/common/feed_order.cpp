@@ -94,6 +94,10 @@ loopd::factor_t FeedOrder::factor(const io::Edge& e, int robotOffset) const {
   const bool odometry =
       io::isBetween(e.type) && from == to && neighboursInIdOrder(sortedIds_, e.from, e.to);
   loopd::factor_t f = edgeFactor(e, from + robotOffset, to + robotOffset, odometry);
+  // A segment boundary's odometry (neighbouring ids, two robots) is a loop closure on the
+  // wire, trusted as loopd-solve trusts odometry: a robust solver must not drop it.
+  if (io::isBetween(e.type) && from != to && neighboursInIdOrder(sortedIds_, e.from, e.to))
+    f.robust = "none";
   // A sighting names its landmark's owner: the pose's robot, or another (cross-robot).
   if (!io::isBetween(e.type)) f.keys.at(1).robot = landmarkOwner(e.to) + robotOffset;
   return f;

@@ -31,7 +31,8 @@ class FeedOrder {
   /// The step a HYPOTHESES group of `ds` is due at (loopd-feed sends it whole): its last
   /// alternative's; -1 when an alternative is not fed.
   long dueAt(const io::Dataset& ds, const io::HypothesisGroup& g) const;
-  /// The edge as the wire's factor_t in its robots' frames, robot ids + robotOffset. A
+  /// The edge as the wire's factor_t in its robots' frames, robot ids + robotOffset. The
+  /// odometry edge across a segment boundary is a loop closure with robust "none". A
   /// sighting names its pose's robot and its landmark's owner (landmarkOwner), which may be
   /// another robot: a cross-robot sighting.
   loopd::factor_t factor(const io::Edge& e, int robotOffset = 0) const;
