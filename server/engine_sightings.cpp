@@ -87,10 +87,13 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       SE3 m3;
       bool fixed = false;
       if (se3) {
-        if (const auto m = alignFrames(pairs3)) m3 = *m, fixed = true;
-      } else if (const auto m = alignFrames(pairs2)) {
-        m2 = *m;
-        fixed = true;
+        const auto m = alignFrames(pairs3);
+        fixed = m.has_value();
+        if (fixed) m3 = *m;
+      } else {
+        const auto m = alignFrames(pairs2);
+        fixed = m.has_value();
+        if (fixed) m2 = *m;
       }
       if (!fixed) {
         ++it;
