@@ -416,9 +416,10 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
       out.push_back({a.id, E::INVALID_FIELD,
                      "ambiguous " + std::to_string(a.id) + " alternative " + std::to_string(i) +
                          " joins robots " + std::to_string(r) + " and " + std::to_string(s) +
-                         ", which no certain inter-robot factor has joined yet: an ambiguous "
+                         ", whose frames no certain factor has joined yet: an ambiguous "
                          "alternative cannot be the first link between two robots' frames; "
-                         "send a certain inter-robot loop closure (factor_t) first"});
+                         "send a certain inter-robot loop closure, or sightings of enough of "
+                         "the other robot's landmarks (factor_t), first"});
       break;  // one issue per group
     }
   for (const auto& v : b.initial_values) {

@@ -7,6 +7,7 @@
 #include <map>
 #include <vector>
 
+#include "loopd/ambiguous_factor_t.hpp"
 #include "tests/server/engine_harness.h"
 
 namespace loopd {
@@ -310,6 +311,44 @@ TEST(EngineSightings, ThreeDimensionalSightingsJoinOnTheThirdLandmark) {
     std::vector<double> x;
     ASSERT_TRUE(h.engine.commonFramePose(poseKey(static_cast<std::uint64_t>(j), 1), x));
     EXPECT_NEAR((Vec3(x[0], x[1], x[2]) - robot1(j).t).norm(), 0.0, 1e-6) << j;
+  }
+}
+
+// Ambiguous cross-robot sightings (which of two landmarks of robot 0 did robot 1 see?) are
+// refused while the frames are not joined, as inter-robot alternatives are, and taken once
+// sightings have joined them: mh picks the true landmark.
+TEST(EngineSightings, AmbiguousCrossRobotSightingsOnceTheFramesAreJoined) {
+  for (const char* solver : {"isam2", "mh"}) {
+    SCOPED_TRACE(solver);
+    TwoRobots t(1.0, false, solver);
+    t.walk();
+    const Vec2 z = t.w.robot1(3).transformTo(t.w.landmarks[1]);
+    auto landmark1or2 = [&] {
+      std::vector<loopd::factor_t> alternatives;
+      for (int l : {1, 2})
+        alternatives.push_back(client::landmarkFactor(KeyRef::pose(1, 3), KeyRef::point(0, l),
+                                                      Eigen::Vector2d(z), kInfo2));
+      t.r1.ambiguous(loopd::ambiguous_factor_t::MULTI_ASSOCIATION, alternatives, false);
+      t.r1.flush();
+    };
+    landmark1or2();
+    ASSERT_EQ(t.h.out.errors.size(), 1u);
+    EXPECT_EQ(t.h.out.errors[0].code, loopd::error_t::INVALID_FIELD);
+    EXPECT_NE(t.firstError().find("whose frames no certain factor has joined yet"),
+              std::string::npos)
+        << t.firstError();
+    t.h.out.errors.clear();
+    t.sight(t.r1, 1, 2, 0);
+    t.sight(t.r1, 1, 4, 3);
+    t.r1.flush();
+    ASSERT_TRUE(t.h.engine.robotJoined(1));
+    landmark1or2();
+    t.h.engine.idle();
+    EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+    // The two sightings that joined the frames, and mh's chosen alternative or, flattened,
+    // both alternatives.
+    EXPECT_EQ(t.anchoredFactors(), std::string(solver) == "mh" ? 3 : 4);
+    if (std::string(solver) == "mh") EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
   }
 }
 
