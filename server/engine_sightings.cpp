@@ -9,7 +9,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <set>
 
 #include "server/engine.h"
 #include "server/frame_alignment.h"
@@ -43,28 +42,31 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
     const Values* v = batchValues.contains(k) ? &batchValues : holder(k);
     return {v, v->slot(k)};
   };
+  auto groupOf = [](const std::map<std::uint32_t, std::uint32_t>& groups, std::uint32_t r) {
+    const auto g = groups.find(r);
+    return g == groups.end() ? r : g->second;
+  };
+  // The frame groups, recomputed only after a join changed them.
+  std::map<std::uint32_t, std::uint32_t> groups = frameGroupsOf(currentInterEdges(&st));
   for (auto it = pending_.begin(); it != pending_.end();) {
     const auto [a, b] = it->first;
-    const std::map<std::uint32_t, std::uint32_t> groups = frameGroupsOf(currentInterEdges(&st));
-    auto groupOf = [&](std::uint32_t r) {
-      const auto g = groups.find(r);
-      return g == groups.end() ? r : g->second;
-    };
-    if (groupOf(a) != groupOf(b)) {
+    if (groupOf(groups, a) != groupOf(groups, b)) {
       if (!robots_.count(a) || !robots_.count(b)) {
         ++it;
         continue;
       }
-      // The landmarks as each robot places them: b's frame in a's aligns them. Repeat
-      // sightings of one landmark are several points on one side but one on the other: the
-      // count of distinct landmarks decides, as frameGroupsOf decides.
-      const bool se3 = robots_.at(a).poseType == VarType::SE3;
-      std::set<Key> distinct;
-      for (const PendingSighting& p : it->second) distinct.insert(p.factor->key(1));
-      if (static_cast<int>(distinct.size()) < (se3 ? 3 : 2)) {
+      // Would the pair's sightings join the frames on their own (enough distinct landmarks)?
+      // The rule frameGroupsOf applies to them once anchored.
+      std::map<FactorId, InterEdge> own;
+      for (const PendingSighting& p : it->second)
+        own[p.factor->id()] = interEdgeOf(p.factor->key(0), p.factor->key(1), p.factor->varType(1));
+      const std::map<std::uint32_t, std::uint32_t> byOwn = frameGroupsOf(own);
+      if (groupOf(byOwn, a) != groupOf(byOwn, b)) {
         ++it;
         continue;
       }
+      // The landmarks as each robot places them: b's frame in a's aligns them.
+      const bool se3 = robots_.at(a).poseType == VarType::SE3;
       std::vector<PointPair2> pairs2;
       std::vector<PointPair3> pairs3;
       for (const PendingSighting& p : it->second) {
@@ -103,11 +105,13 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
                    it->second.size());
       joinRobots(a, b, m2, m3, st);
     }
+    const bool joined = groupOf(groups, a) != groupOf(groups, b);
     for (const PendingSighting& p : it->second) {
       st.update.factors.push_back(anchoredFactor(*p.factor));
       st.owners.push_back(p.owner);
     }
     it = pending_.erase(it);
+    if (joined) groups = frameGroupsOf(currentInterEdges(&st));
   }
 }
 

@@ -118,16 +118,17 @@ std::shared_ptr<Factor> anchoredFactor(const Factor& built) {
 
 bool isAnchored(const Factor& f) { return f.size() == 4; }
 
-InterEdge interEdgeOf(const Factor& f) {
+InterEdge interEdgeOf(Key pose, Key other, VarType otherType) {
   InterEdge e;
-  e.r = keyRobot(f.key(1));
-  e.s = keyRobot(f.key(3));
-  const VarType t = f.varType(3);
-  if (t == VarType::Point2 || t == VarType::Point3) {
-    e.landmark = f.key(3);
-    e.needed = t == VarType::Point2 ? 2 : 3;
+  e.r = keyRobot(pose);
+  e.s = keyRobot(other);
+  if (otherType == VarType::Point2 || otherType == VarType::Point3) {
+    e.landmark = other;
+    e.needed = otherType == VarType::Point2 ? 2 : 3;
   }
   return e;
 }
+
+InterEdge interEdgeOf(const Factor& f) { return interEdgeOf(f.key(1), f.key(3), f.varType(3)); }
 
 }  // namespace loopd::server

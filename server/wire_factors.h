@@ -26,8 +26,7 @@ bool isInterRobot(const loopd::factor_t& f);
 bool isCrossRobotSighting(const loopd::factor_t& f);
 /// An inter-robot between factor or a cross-robot sighting (`built`: its single-frame form)
 /// evaluated through the robots' anchors: keys A_r, x_r, A_s, then x_s or l_s. The anchors
-/// must exist (Engine::joinRobots).
-/// Keeps `built`'s id and robust request.
+/// must exist (Engine::joinRobots). Keeps `built`'s id and robust request.
 std::shared_ptr<Factor> anchoredFactor(const Factor& built);
 /// An anchored (inter-robot) factor: the robots it joins are recorded as inter-robot edges.
 bool isAnchored(const Factor& f);
@@ -39,5 +38,7 @@ struct InterEdge {
   int needed = 0;  // distinct landmarks of a pair that fix its frames (2 in 2D, 3 in 3D)
 };
 InterEdge interEdgeOf(const Factor& anchored);
+/// The edge a factor from `pose` to `other` (a pose or a landmark of another robot) makes.
+InterEdge interEdgeOf(Key pose, Key other, VarType otherType);
 
 }  // namespace loopd::server
