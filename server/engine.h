@@ -21,7 +21,9 @@
 // sighting leaves the rotation between the frames free, so a pair's sightings are kept back
 // (pending_, engine_sightings.cpp) until another factor joins the two frames or they name
 // enough distinct landmarks to fix the transform (2 in 2D, 3 in 3D); the joining robot's
-// anchor then starts at the least-squares alignment of those landmarks.
+// anchor then starts at the least-squares alignment of those landmarks. A sighting of a
+// landmark nobody has placed yet is kept back the same way (it does not hold its batch) and,
+// once the frames are joined, places it in s's frame through the anchors.
 //
 // An ambiguous alternative never creates an anchor (under "none" or another alternative it
 // would be unconstrained, and each alternative implies another anchor value): an inter-robot
@@ -36,6 +38,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -207,6 +210,15 @@ class Engine : private GraphView {
   /// known values its factors refer to.
   void stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings,
                       const Values& batchValues, Staged& st);
+  /// Unknown landmarks of robot s that only the batch's cross-robot sightings (from robots
+  /// r ≠ s, at known or guessed poses) refer to: they do not hold the batch. The sightings are
+  /// kept back as any other until r's and s's frames are joined, and then place the landmark.
+  /// Keys of ambiguous alternatives are not among them (those must exist).
+  std::set<Key> landmarksLeftToSightings(const loopd::factor_batch_t& b, const Values& known,
+                                         const Values& guess) const;
+  /// Initialises the landmark of sighting `f` (when it has no value yet) where the sighting puts
+  /// it, in its owner's frame: A_s⁻¹·A_r·(x_r ⊕ z).
+  void placeSightedLandmark(const Factor& f, const Values& batchValues, Staged& st);
   /// Removes a kept-back sighting; false if `id` is not one.
   bool dropPendingSighting(FactorId id);
   /// The inter-robot edges of the graph with the staged rounds (and `building`) applied.

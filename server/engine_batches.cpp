@@ -202,8 +202,13 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
       intra.push_back(built[i]);
   }
   predictMissingValues(intra, knownVals, guess);
+  // A landmark of robot s that robot r ≠ s sights first does not hold the batch (and every
+  // later one of r's behind it): the sighting is kept back until the frames are joined, and
+  // then places the landmark through the anchors (stageSightings).
+  const std::set<Key> leftToSightings = landmarksLeftToSightings(b, knownVals, guess);
   for (Key k : keys)
-    if (!knownVals.contains(k) && !guess.contains(k)) waiting.push_back(k);
+    if (!knownVals.contains(k) && !guess.contains(k) && !leftToSightings.count(k))
+      waiting.push_back(k);
   for (Key k : altKeys)
     if (!knownVals.contains(k) && !guess.contains(k)) waiting.push_back(k);
   if (!waiting.empty()) return StageResult::Hold;

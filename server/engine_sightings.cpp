@@ -4,7 +4,10 @@
 // the frames free, and the solver would meet a singular system), so a pair's sightings are
 // kept back until another factor joins the frames or they reach enough distinct landmarks to
 // fix the transform (frame_groups.h); the newcomer's anchor then starts at the least-squares
-// alignment of the landmarks as each robot places them (frame_alignment.h).
+// alignment of the landmarks as each robot places them (frame_alignment.h). Any robot may
+// introduce a landmark: a sighting of one its owner has not sent is kept back too, and places
+// it through the anchors once the frames are joined (holding the batch instead held every later
+// batch of the robot behind it).
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -13,6 +16,7 @@
 #include "server/engine.h"
 #include "server/frame_alignment.h"
 #include "server/frame_groups.h"
+#include "server/wire.h"
 #include "solvers/factors/landmark_factors.h"
 
 namespace loopd::server {
@@ -57,9 +61,15 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       }
       // Would the pair's sightings join the frames on their own (enough distinct landmarks)?
       // The rule frameGroupsOf applies to them once anchored.
+      // Only landmarks with a value count: one nobody has introduced cannot align the frames.
+      auto placed = [&](const PendingSighting& p) {
+        return batchValues.contains(p.factor->key(1)) || known(p.factor->key(1));
+      };
       std::map<FactorId, InterEdge> own;
       for (const PendingSighting& p : it->second)
-        own[p.factor->id()] = interEdgeOf(p.factor->key(0), p.factor->key(1), p.factor->varType(1));
+        if (placed(p))
+          own[p.factor->id()] =
+              interEdgeOf(p.factor->key(0), p.factor->key(1), p.factor->varType(1));
       const std::map<std::uint32_t, std::uint32_t> byOwn = frameGroupsOf(own);
       if (groupOf(byOwn, a) != groupOf(byOwn, b)) {
         ++it;
@@ -70,6 +80,7 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       std::vector<PointPair2> pairs2;
       std::vector<PointPair3> pairs3;
       for (const PendingSighting& p : it->second) {
+        if (!placed(p)) continue;
         const Factor& f = *p.factor;
         const auto [pv, ps] = valueSlot(f.key(0));
         const auto [lv, ls] = valueSlot(f.key(1));
@@ -107,12 +118,52 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
     }
     const bool joined = groupOf(groups, a) != groupOf(groups, b);
     for (const PendingSighting& p : it->second) {
+      placeSightedLandmark(*p.factor, batchValues, st);
       st.update.factors.push_back(anchoredFactor(*p.factor));
       st.owners.push_back(p.owner);
     }
     it = pending_.erase(it);
     if (joined) groups = frameGroupsOf(currentInterEdges(&st));
   }
+}
+
+std::set<Key> Engine::landmarksLeftToSightings(const loopd::factor_batch_t& b, const Values& known,
+                                               const Values& guess) const {
+  std::set<Key> left;
+  for (const auto& wf : b.factors) {
+    if (!isCrossRobotSighting(wf)) continue;
+    const Key x = toKey(wf.keys[0]), l = toKey(wf.keys[1]);
+    if (!known.contains(l) && !guess.contains(l) && (known.contains(x) || guess.contains(x)))
+      left.insert(l);
+  }
+  for (const auto& a : b.ambiguous)
+    for (const auto& f : a.alternatives)
+      for (const auto& k : f.keys) left.erase(toKey(k));
+  return left;
+}
+
+void Engine::placeSightedLandmark(const Factor& f, const Values& batchValues, Staged& st) {
+  const Key x = f.key(0), l = f.key(1);
+  if (known(l)) return;  // earlier sightings (or the staged rounds) placed it
+  auto anchor = [&](std::uint32_t robot) -> const Values& {
+    const Key a = anchorKey(robot);
+    return st.update.initial.contains(a) ? st.update.initial : *holder(a);
+  };
+  // The pose: this batch's, or an earlier one's (a sighting kept back since).
+  const Values& poses = batchValues.contains(x) ? batchValues : *holder(x);
+  const std::uint32_t r = keyRobot(x), s = keyRobot(l);
+  Values one;
+  if (f.varType(1) == VarType::Point3) {
+    const SE3 sFromR = se3Of(anchor(s), anchorKey(s)).inverse() * se3Of(anchor(r), anchorKey(r));
+    const Vec3 seen = se3Of(poses, x).transform(static_cast<const PosePointFactor3&>(f).measured());
+    one.insertPoint3(l, sFromR.transform(seen));
+  } else {
+    const SE2 sFromR = se2Of(anchor(s), anchorKey(s)).inverse() * se2Of(anchor(r), anchorKey(r));
+    one.insertPoint2(l, sFromR.transform(se2Of(poses, x).transform(sightedPoint2(f))));
+  }
+  st.update.initial.insertFrom(one, 0);
+  stagedValues_.insertFrom(one, 0);
+  spdlog::debug("robot {} introduces {} (its owner has not sighted it yet)", r, keyToString(l));
 }
 
 bool Engine::dropPendingSighting(FactorId id) {
