@@ -158,6 +158,20 @@ TEST(FeedOrder, ALandmarkIsItsFirstSightersAndEverySightingSaysSo) {
   EXPECT_THROW(inTurn.landmarkOwner(8), std::out_of_range);  // nobody sights it
 }
 
+// A shared landmark map (loopd-feed --landmark-owner R): every landmark is robot R's, even one
+// only another robot sights, and that robot's sightings of it are cross-robot ones.
+TEST(FeedOrder, AFixedOwnerTakesEveryLandmark) {
+  io::Dataset ds = sixPoses();
+  ds.edges[6].from = 4;  // only robot 1 (poses 3 4 5) sights landmark 7
+  const FeedOrder owned(ds, -1, 2, false, 0);
+  EXPECT_EQ(owned.landmarkOwner(7), 0);
+  EXPECT_EQ(name(owned.factor(ds.edges[6]).keys[0]), "1 pose 4");
+  EXPECT_EQ(name(owned.factor(ds.edges[6]).keys[1]), "0 landmark 7");
+  EXPECT_EQ(FeedOrder(ds, -1, 2, false).landmarkOwner(7), 1);  // by default its sighter's
+  EXPECT_THROW(FeedOrder(ds, -1, 2, false, 2), std::invalid_argument);
+  EXPECT_THROW(FeedOrder(ds, 1, 2, false, 1), std::invalid_argument);  // one pose: one robot
+}
+
 // Eight poses in two robots round-robin, 0 4 1 5 2 6 3 7; landmark 9 sighted from 4, 1 and 3.
 // With --poses 4 the first sighter (4) is not fed and does not count: the robots are 0 1 and
 // 2 3, fed 0 2 1 3, and pose 1 (robot 0) sights it first.

@@ -331,11 +331,21 @@ TEST(FeedArguments, MalformedNumbersAreUsageErrors) {
   const std::string feed =
       kFeed + " " + kDatasets + "/tinyGrid3D.g2o --quiet --log " + tmp("feed.lcmlog") + " ";
   const std::vector<std::pair<std::string, std::string>> cases = {
-      {"--robots 2x", "--robots"},   {"--robots abc", "--robots"}, {"--robots 0", "--robots"},
-      {"--robots 1001", "--robots"}, {"--poses 5abc", "--poses"},  {"--poses -3", "--poses"},
-      {"--poses 0", "--poses"},      {"--rate nan", "--rate"},     {"--rate 1e999", "--rate"},
-      {"--rate -1", "--rate"},       {"--rate 2hz", "--rate"},     {"--rate inf", "--rate"},
-      {"--rate 1e-300", "--rate"}};
+      {"--robots 2x", "--robots"},
+      {"--robots abc", "--robots"},
+      {"--robots 0", "--robots"},
+      {"--robots 1001", "--robots"},
+      {"--poses 5abc", "--poses"},
+      {"--poses -3", "--poses"},
+      {"--poses 0", "--poses"},
+      {"--rate nan", "--rate"},
+      {"--rate 1e999", "--rate"},
+      {"--rate -1", "--rate"},
+      {"--rate 2hz", "--rate"},
+      {"--rate inf", "--rate"},
+      {"--rate 1e-300", "--rate"},
+      {"--landmark-owner -1", "--landmark-owner"},
+      {"--landmark-owner x", "--landmark-owner"}};
   for (const auto& [args, flag] : cases) {
     const Outcome r = run(feed + args);
     EXPECT_EQ(r.status, 2) << args << "\n" << r.err;
@@ -343,6 +353,12 @@ TEST(FeedArguments, MalformedNumbersAreUsageErrors) {
   }
   const Outcome ok = run(feed + "--robots 2 --poses 5 --rate 0");
   EXPECT_EQ(ok.status, 0) << ok.err;
+  // The owner must be one of the robots.
+  const Outcome owner = run(feed + "--robots 2 --landmark-owner 2");
+  EXPECT_EQ(owner.status, 2) << owner.err;
+  EXPECT_EQ(owner.err.rfind("loopd-feed: --landmark-owner 2 needs --robots above it", 0), 0u)
+      << owner.err;
+  EXPECT_EQ(run(feed + "--robots 2 --landmark-owner 1").status, 0);
   const Outcome slow = run(feed + "--poses 3 --rate 1e6");  // a log does not wait
   EXPECT_EQ(slow.status, 0) << slow.err;
 }

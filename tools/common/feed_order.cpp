@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <string>
 #include <utility>
 
 #include "solvers/problem/pose_graph_problem.h"
@@ -9,7 +10,8 @@
 
 namespace loopd::tools {
 
-FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool interleave) {
+FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool interleave,
+                     int fixedOwner) {
   std::vector<std::int64_t> ids;
   for (const auto& v : ds.poses) ids.push_back(v.id);
   std::sort(ids.begin(), ids.end());
@@ -31,6 +33,9 @@ FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool i
     for (size_t k = 0; order_.size() < n; ++k)
       for (size_t r = 0; r < robots; ++r)
         if (k < segment[r].size()) order_.push_back(segment[r][k]);
+  if (fixedOwner >= robots_)
+    throw std::invalid_argument("landmark owner " + std::to_string(fixedOwner) +
+                                " is not one of the " + std::to_string(robots_) + " robots");
   std::vector<bool> started(robots, false);
   startsRobot_.resize(n);
   for (size_t i = 0; i < n; ++i) {
@@ -65,7 +70,7 @@ FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool i
     const auto [it, fresh] = first.emplace(e.to, std::make_pair(step, rank));
     if (fresh || std::make_pair(step, rank) < it->second) {
       it->second = {step, rank};
-      landmarkOwner_[e.to] = robotOf_.at(e.from);
+      landmarkOwner_[e.to] = fixedOwner >= 0 ? fixedOwner : robotOf_.at(e.from);
     }
   }
 }

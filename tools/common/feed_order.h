@@ -2,8 +2,9 @@
 // The order in which a dataset's poses are played to a server (loopd-feed, the server
 // benchmarks): by id, optionally only the first N; cut into consecutive segments, one robot
 // each; one segment after the other or round-robin over the robots. An edge is due at the
-// step its last pose appears. Each landmark belongs to one robot, the one whose sighting of it
-// is published first; every robot's sightings of it go to that robot's landmark.
+// step its last pose appears. Each landmark belongs to one robot, by default the one whose
+// sighting of it is published first (or one robot for all: a shared landmark map); every
+// robot's sightings of it go to that robot's landmark.
 #include <cstdint>
 #include <unordered_map>
 #include <vector>
@@ -16,8 +17,10 @@ namespace loopd::tools {
 class FeedOrder {
  public:
   /// Throws std::runtime_error when the file has no poses. `poses` < 0 feeds them all;
-  /// `robots` is capped at the number of poses fed.
-  FeedOrder(const io::Dataset& ds, long poses, int robots, bool interleave);
+  /// `robots` is capped at the number of poses fed. `landmarkOwner` ≥ 0 gives every landmark
+  /// to that robot (std::invalid_argument unless it is below robots()); < 0, each to its
+  /// first sighter.
+  FeedOrder(const io::Dataset& ds, long poses, int robots, bool interleave, int landmarkOwner = -1);
 
   const std::vector<std::int64_t>& poses() const { return order_; }  // ids, in feed order
   int robots() const { return robots_; }
@@ -39,10 +42,11 @@ class FeedOrder {
   /// An EQUIV pair's edge (io::equivalenceEdge), trusted as loopd-solve trusts it: odometry
   /// within one robot, a loop closure with robust "none" (never down-weighted) across two.
   loopd::factor_t equivalenceFactor(const io::Edge& e, int robotOffset = 0) const;
-  /// 0-based robot owning a landmark (file id): the robot of the fed pose whose sighting of it
-  /// is published first, i.e. the first in feed order (a sighting in a HYPOTHESES group counts
-  /// at its group's step, one in a group never sent after all others); its landmark key is
-  /// the one every robot's sightings name. Throws std::out_of_range when no fed pose sights it.
+  /// 0-based robot owning a landmark (file id): the constructor's `landmarkOwner`, or else the
+  /// robot of the fed pose whose sighting of it is published first, i.e. the first in feed order (a
+  /// sighting in a HYPOTHESES group counts at its group's step, one in a group never sent after all
+  /// others); its landmark key is the one every robot's sightings name. Throws std::out_of_range
+  /// when no fed pose sights it.
   int landmarkOwner(std::int64_t landmarkId) const { return landmarkOwner_.at(landmarkId); }
   /// The landmarks (file ids, ascending) that fed poses of more than one robot sight. The other
   /// robots' sightings of one go to its owner's landmark (cross-robot sightings), which ties

@@ -2,7 +2,7 @@
 // LCM log for lcm-logplayer.
 //
 //   loopd-feed DATASET [--robots N] [--rate HZ] [--lcm-url URL] [--sender NAME] [--log OUT.lcmlog]
-//              [--channel-prefix P] [--interleave] [--poses N] [--quiet]
+//              [--channel-prefix P] [--interleave] [--poses N] [--landmark-owner R] [--quiet]
 //
 // The poses (by file id) are cut into N consecutive segments, robot k owning segment k; a pose
 // keeps its file id as its index. Poses appear in id order (or, with --interleave, round-robin
@@ -14,7 +14,9 @@
 // A landmark belongs to the robot whose pose sights it first in feed order
 // (FeedOrder::landmarkOwner): every robot's sightings of it name that robot's landmark, so
 // another robot's are cross-robot sightings, published after the owner's first, and tie the
-// robots' frames together.
+// robots' frames together. --landmark-owner R gives every landmark to robot R instead (a
+// shared landmark map): the server then places a landmark R has not sighted from another
+// robot's sighting once their frames are joined.
 // TORO EQUIV pairs go as trusted identity constraints (FeedOrder::equivalenceFactor), ids
 // following the edges' as in loopd-solve (TORO has no HYPOTHESES: no group id is taken).
 // The k-th batch of a sender has sequence k, so feeding the same file again is a resend.
@@ -47,6 +49,7 @@ namespace {
 struct Options {
   std::string dataset, lcmUrl, sender = "feed", log, prefix = "LOOPD_";
   int robots = 1;
+  int landmarkOwner = -1;  // < 0: each landmark is its first sighter's
   double rate = 0.0;
   bool interleave = false, quiet = false;
   long poses = -1;
@@ -54,15 +57,17 @@ struct Options {
 
 const char* kUsage =
     "usage: loopd-feed DATASET [--robots N] [--rate HZ] [--lcm-url URL] [--sender NAME]\n"
-    "                  [--log OUT.lcmlog] [--channel-prefix P] [--interleave] [--poses N] "
-    "[--quiet]\n"
+    "                  [--log OUT.lcmlog] [--channel-prefix P] [--interleave] [--poses N]\n"
+    "                  [--landmark-owner R] [--quiet]\n"
     "  --robots N        split the poses into N (1-1000) consecutive segments, one robot each\n"
     "                    (default 1)\n"
     "  --rate HZ         poses per second, >= 0 (default 0 = as fast as possible)\n"
     "  --sender NAME     sender names are NAME0, NAME1, ... (default feed)\n"
     "  --log OUT         write an LCM log (replay with lcm-logplayer) instead of publishing\n"
     "  --interleave      robots publish round-robin instead of one segment after the other\n"
-    "  --poses N         only the first N poses (N >= 1; and the edges among them)\n";
+    "  --poses N         only the first N poses (N >= 1; and the edges among them)\n"
+    "  --landmark-owner R every landmark is robot R's (0 <= R < N: a shared landmark map);\n"
+    "                    default: each is the robot's that sights it first\n";
 
 Options parse(int argc, char** argv) {
   Options o;
@@ -92,6 +97,8 @@ Options parse(int argc, char** argv) {
       o.poses = static_cast<long>(tools::parseIntFlag(a, val(), 1, 1000000000));
     else if (a == "--interleave")
       o.interleave = true;
+    else if (a == "--landmark-owner")
+      o.landmarkOwner = static_cast<int>(tools::parseIntFlag(a, val(), 0, 999));
     else if (a == "--quiet")
       o.quiet = true;
     else if (a.rfind("--", 0) == 0)
@@ -102,6 +109,9 @@ Options parse(int argc, char** argv) {
       throw std::invalid_argument("unexpected argument " + a);
   }
   if (o.dataset.empty()) throw std::invalid_argument("no DATASET");
+  if (o.landmarkOwner >= o.robots)
+    throw std::invalid_argument("--landmark-owner " + std::to_string(o.landmarkOwner) +
+                                " needs --robots above it (got " + std::to_string(o.robots) + ")");
   return o;
 }
 
@@ -123,14 +133,15 @@ std::int8_t ambiguousMode(const std::vector<loopd::factor_t>& alternatives, int 
 
 int run(const Options& o) {
   io::Dataset ds = io::readDataset(o.dataset);
-  const tools::FeedOrder feed(ds, o.poses, o.robots, o.interleave);
+  const tools::FeedOrder feed(ds, o.poses, o.robots, o.interleave, o.landmarkOwner);
   const std::vector<std::int64_t> shared = feed.sharedLandmarks(ds);
   if (!shared.empty() && !o.quiet)
     std::fprintf(stderr,
                  "loopd-feed: %zu landmarks (first: %lld) are sighted by more than one robot: "
-                 "their sightings go to the first robot's landmark, which ties the robots' "
-                 "frames together\n",
-                 shared.size(), static_cast<long long>(shared.front()));
+                 "their sightings go to %s landmark, which ties the robots' frames "
+                 "together\n",
+                 shared.size(), static_cast<long long>(shared.front()),
+                 o.landmarkOwner >= 0 ? "the owner's" : "the first robot's");
   const std::vector<std::int64_t>& order = feed.poses();
   const size_t n = order.size();
   const size_t robots = static_cast<size_t>(feed.robots());
