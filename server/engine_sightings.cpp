@@ -34,12 +34,11 @@ Vec2 sightedPoint2(const Factor& f) {
 
 void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings,
                             const Values& batchValues, Staged& st) {
+  std::map<RobotPair, Key> firstKeptBack;  // pairs with nothing kept back before this batch
   for (const auto& [f, owner] : sightings) {
-    const std::uint32_t r = keyRobot(f->key(0)), s = keyRobot(f->key(1));
-    std::vector<PendingSighting>& list = pending_[std::minmax(r, s)];
-    if (list.empty())
-      spdlog::debug("robot {} sights {}: kept back until robots {} and {} share a frame", r,
-                    keyToString(f->key(1)), r, s);
+    const RobotPair pair = std::minmax(keyRobot(f->key(0)), keyRobot(f->key(1)));
+    std::vector<PendingSighting>& list = pending_[pair];
+    if (list.empty()) firstKeptBack.emplace(pair, f->key(1));
     list.push_back({f, owner});
   }
   auto valueSlot = [&](Key k) -> std::pair<const Values*, int> {
@@ -125,6 +124,13 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
     it = pending_.erase(it);
     if (joined) groups = frameGroupsOf(currentInterEdges(&st));
   }
+  // Once per pair until it is joined (at info: a front-end's sightings not in the map yet).
+  for (const auto& [pair, landmark] : firstKeptBack)
+    if (pending_.count(pair))
+      spdlog::info(
+          "sightings between robots {} and {} (first: {}) are kept back until a loop closure "
+          "joins their frames or they name enough placed landmarks (2 in 2D, 3 in 3D)",
+          pair.first, pair.second, keyToString(landmark));
 }
 
 std::set<Key> Engine::landmarksLeftToSightings(const loopd::factor_batch_t& b, const Values& known,

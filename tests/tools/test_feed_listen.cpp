@@ -335,6 +335,10 @@ void feedVictoriaParkInTwoRobots(const std::string& name, const std::vector<std:
 TEST(LoopdFeed, VictoriaParkInTwoRobotsJoinsThroughSharedLandmarks) {
   std::string said, log;
   feedVictoriaParkInTwoRobots("vp2", {}, said, log);
+  // Said once, at info: the sightings wait, and what would let them in.
+  const std::string kept = "sightings between robots 0 and 1 (first: ";
+  EXPECT_NE(log.find(kept), std::string::npos) << log;
+  EXPECT_EQ(log.find(kept), log.rfind(kept)) << log;
   EXPECT_NE(log.find("robots 0 and 1: 5 landmark sightings fix their frames"), std::string::npos)
       << log;
 }
