@@ -197,12 +197,13 @@ int main(int argc, char** argv) {
         stderr,
         "loopd-listen: %zu poses, %zu landmarks written to %s (%lld estimate messages, %zu robots, "
         "%d in a common frame; server %s%s, chi2 %.12g, %lld batches accepted, %lld duplicate, "
-        "%lld rejected)\n",
+        "%lld rejected, %lld expired, %lld held)\n",
         ds.poses.size(), ds.landmarks.size(), out.c_str(),
         static_cast<long long>(sub.estimatesReceived()), sub.all().size(), common,
         st.solver.c_str(), st.converged ? " converged" : "", st.chi2,
         static_cast<long long>(st.batches_accepted), static_cast<long long>(st.batches_duplicate),
-        static_cast<long long>(st.batches_rejected));
+        static_cast<long long>(st.batches_rejected), static_cast<long long>(st.batches_expired),
+        static_cast<long long>(st.batches_held));
   }
   return 0;
 }
