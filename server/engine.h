@@ -214,7 +214,7 @@ class Engine : private GraphView {
   /// r ≠ s, at known or guessed poses) refer to: they do not hold the batch. The sightings are
   /// kept back as any other until r's and s's frames are joined, and then place the landmark.
   /// Keys of ambiguous alternatives are not among them (those must exist).
-  std::set<Key> landmarksLeftToSightings(const loopd::factor_batch_t& b, const Values& known,
+  std::set<Key> landmarksLeftToSightings(const loopd::factor_batch_t& b, const Values& knownVals,
                                          const Values& guess) const;
   /// Initialises the landmark of sighting `f` (when it has no value yet) where the sighting puts
   /// it, in its owner's frame: A_s⁻¹·A_r·(x_r ⊕ z).

@@ -133,13 +133,14 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
           pair.first, pair.second, keyToString(landmark));
 }
 
-std::set<Key> Engine::landmarksLeftToSightings(const loopd::factor_batch_t& b, const Values& known,
-                                               const Values& guess) const {
+std::set<Key> Engine::landmarksLeftToSightings(const loopd::factor_batch_t& b,
+                                               const Values& knownVals, const Values& guess) const {
   std::set<Key> left;
   for (const auto& wf : b.factors) {
     if (!isCrossRobotSighting(wf)) continue;
     const Key x = toKey(wf.keys[0]), l = toKey(wf.keys[1]);
-    if (!known.contains(l) && !guess.contains(l) && (known.contains(x) || guess.contains(x)))
+    if (!knownVals.contains(l) && !guess.contains(l) &&
+        (knownVals.contains(x) || guess.contains(x)))
       left.insert(l);
   }
   for (const auto& a : b.ambiguous)

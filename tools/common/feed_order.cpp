@@ -49,9 +49,10 @@ FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool i
   // group's (after every sent sighting if the group is not fed); at one step, the earlier
   // pose's. Ownership going by that order, the owner's first sighting, which introduces the
   // landmark to the server, is published no later than any other robot's sighting of it: the
-  // server never holds a batch for want of it. Without groups spanning poses, this is the
-  // robot of the first fed pose (in feed order) sighting the landmark, and a sighting due at
-  // the same step as the first is that pose's: the owner's own.
+  // server never has to place it from another robot's sighting (with a fixed owner it may:
+  // it keeps those sightings back until the frames are joined). Without groups spanning
+  // poses, this is the robot of the first fed pose (in feed order) sighting the landmark, and
+  // a sighting due at the same step as the first is that pose's: the owner's own.
   std::vector<long> groupStep(ds.edges.size(), -2);  // -2: in no group
   for (const io::HypothesisGroup& g : ds.hypotheses) {
     const long at = dueAt(ds, g);
