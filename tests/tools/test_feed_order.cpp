@@ -168,6 +168,9 @@ TEST(FeedOrder, AFixedOwnerTakesEveryLandmark) {
   EXPECT_EQ(name(owned.factor(ds.edges[6]).keys[0]), "1 pose 4");
   EXPECT_EQ(name(owned.factor(ds.edges[6]).keys[1]), "0 landmark 7");
   EXPECT_EQ(FeedOrder(ds, -1, 2, false).landmarkOwner(7), 1);  // by default its sighter's
+  EXPECT_EQ(owned.landmarksOnlyOthersSight(ds), (std::vector<std::int64_t>{7}));
+  EXPECT_TRUE(FeedOrder(ds, -1, 2, false).landmarksOnlyOthersSight(ds).empty());
+  EXPECT_TRUE(FeedOrder(ds, -1, 2, false, 1).landmarksOnlyOthersSight(ds).empty());
   EXPECT_THROW(FeedOrder(ds, -1, 2, false, 2), std::invalid_argument);
   EXPECT_THROW(FeedOrder(ds, 1, 2, false, 1), std::invalid_argument);  // one pose: one robot
 }

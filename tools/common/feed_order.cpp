@@ -133,4 +133,19 @@ std::vector<std::int64_t> FeedOrder::sharedLandmarks(const io::Dataset& ds) cons
   return shared;
 }
 
+std::vector<std::int64_t> FeedOrder::landmarksOnlyOthersSight(const io::Dataset& ds) const {
+  std::unordered_map<std::int64_t, bool> byOwner;  // landmark → its owner sights it
+  for (const auto& e : ds.edges) {
+    if (io::isBetween(e.type)) continue;
+    const auto r = robotOf_.find(e.from);
+    if (r == robotOf_.end()) continue;  // not fed
+    byOwner[e.to] = byOwner[e.to] || r->second == landmarkOwner_.at(e.to);
+  }
+  std::vector<std::int64_t> only;
+  for (const auto& [landmark, owned] : byOwner)
+    if (!owned) only.push_back(landmark);
+  std::sort(only.begin(), only.end());
+  return only;
+}
+
 }  // namespace loopd::tools

@@ -52,6 +52,9 @@ class FeedOrder {
   /// robots' sightings of one go to its owner's landmark (cross-robot sightings), which ties
   /// the robots' frames together.
   std::vector<std::int64_t> sharedLandmarks(const io::Dataset& ds) const;
+  /// The landmarks (file ids, ascending) that fed poses sight but none of their owner's: with
+  /// a fixed owner, the server places them from other robots' sightings (empty otherwise).
+  std::vector<std::int64_t> landmarksOnlyOthersSight(const io::Dataset& ds) const;
 
  private:
   std::vector<std::int64_t> order_;

@@ -142,6 +142,12 @@ int run(const Options& o) {
                  "together\n",
                  shared.size(), static_cast<long long>(shared.front()),
                  o.landmarkOwner >= 0 ? "the owner's" : "the first robot's");
+  const std::vector<std::int64_t> othersOnly = feed.landmarksOnlyOthersSight(ds);
+  if (!othersOnly.empty() && !o.quiet)
+    std::fprintf(stderr,
+                 "loopd-feed: %zu landmarks of robot %d (first: %lld) are sighted only by other "
+                 "robots: the server places them once those robots' frames are joined to its\n",
+                 othersOnly.size(), o.landmarkOwner, static_cast<long long>(othersOnly.front()));
   const std::vector<std::int64_t>& order = feed.poses();
   const size_t n = order.size();
   const size_t robots = static_cast<size_t>(feed.robots());
