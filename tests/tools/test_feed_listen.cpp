@@ -2,6 +2,7 @@
 // numbers, ids, roles, robots), its determinism, and loopd-listen's files against a live server.
 #include <lcm/lcm-cpp.hpp>
 
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <map>
@@ -11,6 +12,7 @@
 #include "loopd/ambiguous_factor_t.hpp"
 #include "loopd/factor_batch_t.hpp"
 #include "tests/server/live_util.h"
+#include "tests/tools/landmark_world3d.h"
 
 using namespace loopd;
 using namespace loopd::testing_live;
@@ -293,38 +295,43 @@ TEST(LoopdFeed, HypothesesGroupsBecomeAmbiguousFactors) {
   EXPECT_EQ(factors, 2512 - 15);  // the true closures travel inside their groups
 }
 
-// Victoria Park fed to a fresh server as two robots, interleaved, with `extra` loopd-feed
-// flags: what loopd-listen said at the end, and the server's log.
-void feedVictoriaParkInTwoRobots(const std::string& name, const std::vector<std::string>& extra,
-                                 std::string& said, std::string& log) {
+// `dataset` fed by loopd-feed with `feedArgs` to a fresh server until `batches` are handled:
+// what loopd-listen said at the end, and the server's log.
+void feedThroughServer(const std::string& name, const std::string& dataset, int batches,
+                       const std::vector<std::string>& feedArgs, std::string& said,
+                       std::string& log) {
   const std::string url = uniqueUrl();
   Proc srv = Proc::start({kLoopd, "--lcm-url", url}, tmp(name + "_srv.log"));
   ASSERT_TRUE(srv.waitForOutput("loopd: solver", 20)) << srv.output();
-  Proc listen = Proc::start(
-      {kListen, "--lcm-url", url, "--out", tmp(name + ".g2o"), "--until-batches", "6969"},
-      tmp(name + "_listen.log"));
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", tmp(name + ".g2o"),
+                             "--until-batches", std::to_string(batches)},
+                            tmp(name + "_listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  std::vector<std::string> feed = {kFeed,
-                                   kData + "/victoria_park.txt",
-                                   "--robots",
-                                   "2",
-                                   "--interleave",
-                                   "--rate",
-                                   "2000",
-                                   "--lcm-url",
-                                   url,
-                                   "--quiet"};
-  feed.insert(feed.end(), extra.begin(), extra.end());
+  std::vector<std::string> feed = {kFeed, dataset, "--rate", "2000", "--lcm-url", url, "--quiet"};
+  feed.insert(feed.end(), feedArgs.begin(), feedArgs.end());
   ASSERT_EQ(runTool(feed, tmp(name + "_feed.log")), 0);
   ASSERT_EQ(listen.wait(120), 0) << listen.output();
   srv.kill(SIGINT);
   EXPECT_EQ(srv.wait(20), 0);
   said = listen.output();
   log = srv.output();
-  EXPECT_NE(said.find("2 robots, 2 in a common frame"), std::string::npos) << said;
+}
+
+// The server's χ² in loopd-listen's summary (NaN when it is not there).
+double chi2Said(const std::string& said) {
   const size_t at = said.find("chi2 ");
-  ASSERT_NE(at, std::string::npos) << said;
-  EXPECT_NEAR(std::stod(said.substr(at + 5)), 6184.12, 0.01) << said;
+  return at == std::string::npos ? std::nan("") : std::stod(said.substr(at + 5));
+}
+
+// Victoria Park in two robots, interleaved, with `extra` loopd-feed flags: both robots end in
+// one frame at the single-robot optimum.
+void feedVictoriaParkInTwoRobots(const std::string& name, const std::vector<std::string>& extra,
+                                 std::string& said, std::string& log) {
+  std::vector<std::string> args = {"--robots", "2", "--interleave"};
+  args.insert(args.end(), extra.begin(), extra.end());
+  feedThroughServer(name, kData + "/victoria_park.txt", 6969, args, said, log);
+  EXPECT_NE(said.find("2 robots, 2 in a common frame"), std::string::npos) << said;
+  EXPECT_NEAR(chi2Said(said), 6184.12, 0.01) << said;
 }
 
 // Victoria Park in two robots, interleaved: the two halves share 66 landmarks long before the
@@ -352,6 +359,31 @@ TEST(LoopdFeed, VictoriaParkWithOneLandmarkOwnerEndsAtTheOptimum) {
   feedVictoriaParkInTwoRobots("vp2_owner", {"--landmark-owner", "0"}, said, log);
   EXPECT_NE(said.find("151 landmarks"), std::string::npos) << said;
   EXPECT_NE(said.find("6969 batches accepted, 0 duplicate, 0 rejected"), std::string::npos) << said;
+}
+
+// 3D cross-robot sightings through the daemon (../shared/datasets has no 3D landmark file):
+// a synthetic world of 600 SE(3) poses and 120 landmarks fed as three robots, interleaved,
+// every landmark robot 1's. Sightings of three placed landmarks join each pair's frames,
+// landmarks robot 1 never sees are placed from the others' sightings, and the server ends at
+// the offline optimum (loopd-solve, batch).
+TEST(LoopdFeed, ThreeRobotsIn3DJoinThroughLandmarksAndEndAtTheOptimum) {
+  const std::string world = tmp("world3d.g2o"), stats = tmp("world3d_stats.json");
+  ASSERT_GT(test::writeLandmarkWorld3D(world, 600, 120, 3), 1000);
+  ASSERT_EQ(runTool({kSolve, world, "--solver", "lm", "--quiet", "--stats", stats},
+                    tmp("world3d_solve.log")),
+            0);
+  std::stringstream text;
+  text << std::ifstream(stats).rdbuf();
+  const size_t at = text.str().find("\"final_chi2\": ");
+  ASSERT_NE(at, std::string::npos) << text.str();
+  const double optimum = std::stod(text.str().substr(at + 14));
+  std::string said, log;
+  feedThroughServer("world3d", world, 600,
+                    {"--robots", "3", "--interleave", "--landmark-owner", "1"}, said, log);
+  EXPECT_NE(said.find("600 poses, 120 landmarks"), std::string::npos) << said;
+  EXPECT_NE(said.find("3 robots, 3 in a common frame"), std::string::npos) << said;
+  EXPECT_NE(log.find("landmark sightings fix their frames"), std::string::npos) << log;
+  EXPECT_NEAR(chi2Said(said), optimum, 1e-6 * optimum) << said;
 }
 
 TEST(LoopdFeed, AmbiguousIntelThroughTheServerMatchesLoopdSolve) {
