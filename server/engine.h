@@ -206,10 +206,9 @@ class Engine : private GraphView {
   void joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const SE3& m3, Staged& st);
   /// Cross-robot sightings (engine_sightings.cpp): the batch's are kept back while their
   /// robots' frames are not joined; all of a pair's go in (anchored) once its frames are joined
-  /// or its sightings fix the transform between them. `batchValues`: the batch's and the
-  /// known values its factors refer to.
-  void stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings,
-                      const Values& batchValues, Staged& st);
+  /// or its sightings fix the transform between them. The batch's guessed values are staged
+  /// (holder() finds them) before it runs.
+  void stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings, Staged& st);
   /// Unknown landmarks of robot s that only the batch's cross-robot sightings (from robots
   /// r ≠ s, at known or guessed poses) refer to: they do not hold the batch. The sightings are
   /// kept back as any other until r's and s's frames are joined, and then place the landmark.
@@ -218,7 +217,7 @@ class Engine : private GraphView {
                                          const Values& guess) const;
   /// Initialises the landmark of sighting `f` (when it has no value yet) where the sighting puts
   /// it, in its owner's frame: A_s⁻¹·A_r·(x_r ⊕ z).
-  void placeSightedLandmark(const Factor& f, const Values& batchValues, Staged& st);
+  void placeSightedLandmark(const Factor& f, Staged& st);
   /// Removes a kept-back sighting; false if `id` is not one.
   bool dropPendingSighting(FactorId id);
   /// The inter-robot edges of the graph with the staged rounds (and `building`) applied.

@@ -287,7 +287,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     u.factors.push_back(f);
     st.owners.push_back(owner);
   }
-  stageSightings(sightings, batchValues, st);
+  stageSightings(sightings, st);
   // Ambiguous groups: each alternative is built like a factor_t and gets an internal id of
   // its own; the group's internal id is what the sender's id maps to. An inter-robot
   // alternative goes through the anchors of its robots, which certain inter-robot factors

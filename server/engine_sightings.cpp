@@ -32,8 +32,7 @@ Vec2 sightedPoint2(const Factor& f) {
 
 }  // namespace
 
-void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings,
-                            const Values& batchValues, Staged& st) {
+void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings, Staged& st) {
   std::map<RobotPair, Key> firstKeptBack;  // pairs with nothing kept back before this batch
   for (const auto& [f, owner] : sightings) {
     const RobotPair pair = std::minmax(keyRobot(f->key(0)), keyRobot(f->key(1)));
@@ -42,7 +41,7 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
     list.push_back({f, owner});
   }
   auto valueSlot = [&](Key k) -> std::pair<const Values*, int> {
-    const Values* v = batchValues.contains(k) ? &batchValues : holder(k);
+    const Values* v = holder(k);
     return {v, v->slot(k)};
   };
   auto groupOf = [](const std::map<std::uint32_t, std::uint32_t>& groups, std::uint32_t r) {
@@ -61,9 +60,7 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       // Would the pair's sightings join the frames on their own (enough distinct landmarks)?
       // The rule frameGroupsOf applies to them once anchored.
       // Only landmarks with a value count: one nobody has introduced cannot align the frames.
-      auto placed = [&](const PendingSighting& p) {
-        return batchValues.contains(p.factor->key(1)) || known(p.factor->key(1));
-      };
+      auto placed = [&](const PendingSighting& p) { return known(p.factor->key(1)); };
       std::map<FactorId, InterEdge> own;
       for (const PendingSighting& p : it->second)
         if (placed(p))
@@ -117,7 +114,7 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
     }
     const bool joined = groupOf(groups, a) != groupOf(groups, b);
     for (const PendingSighting& p : it->second) {
-      placeSightedLandmark(*p.factor, batchValues, st);
+      placeSightedLandmark(*p.factor, st);
       st.update.factors.push_back(anchoredFactor(*p.factor));
       st.owners.push_back(p.owner);
     }
@@ -149,24 +146,21 @@ std::set<Key> Engine::landmarksLeftToSightings(const loopd::factor_batch_t& b,
   return left;
 }
 
-void Engine::placeSightedLandmark(const Factor& f, const Values& batchValues, Staged& st) {
+void Engine::placeSightedLandmark(const Factor& f, Staged& st) {
   const Key x = f.key(0), l = f.key(1);
   if (known(l)) return;  // earlier sightings (or the staged rounds) placed it
-  auto anchor = [&](std::uint32_t robot) -> const Values& {
-    const Key a = anchorKey(robot);
-    return st.update.initial.contains(a) ? st.update.initial : *holder(a);
-  };
-  // The pose: this batch's, or an earlier one's (a sighting kept back since).
-  const Values& poses = batchValues.contains(x) ? batchValues : *holder(x);
+  // Every value it needs is known or staged (this batch's guesses and new anchors included).
+  auto at = [&](Key k) -> const Values& { return *holder(k); };
   const std::uint32_t r = keyRobot(x), s = keyRobot(l);
+  const Key ar = anchorKey(r), as = anchorKey(s);
   Values one;
   if (f.varType(1) == VarType::Point3) {
-    const SE3 sFromR = se3Of(anchor(s), anchorKey(s)).inverse() * se3Of(anchor(r), anchorKey(r));
-    const Vec3 seen = se3Of(poses, x).transform(static_cast<const PosePointFactor3&>(f).measured());
+    const SE3 sFromR = se3Of(at(as), as).inverse() * se3Of(at(ar), ar);
+    const Vec3 seen = se3Of(at(x), x).transform(static_cast<const PosePointFactor3&>(f).measured());
     one.insertPoint3(l, sFromR.transform(seen));
   } else {
-    const SE2 sFromR = se2Of(anchor(s), anchorKey(s)).inverse() * se2Of(anchor(r), anchorKey(r));
-    one.insertPoint2(l, sFromR.transform(se2Of(poses, x).transform(sightedPoint2(f))));
+    const SE2 sFromR = se2Of(at(as), as).inverse() * se2Of(at(ar), ar);
+    one.insertPoint2(l, sFromR.transform(se2Of(at(x), x).transform(sightedPoint2(f))));
   }
   st.update.initial.insertFrom(one, 0);
   stagedValues_.insertFrom(one, 0);
