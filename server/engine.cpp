@@ -103,6 +103,34 @@ std::map<FactorId, InterEdge> Engine::currentInterEdges(const Staged* building) 
   return edges;
 }
 
+OwnerTies Engine::ownerTiesAt(const Staged* building) const {
+  // The staged rounds' ties, added and removed, over the committed counts.
+  std::map<Key, int> delta;
+  std::map<FactorId, Key> stagedTies;
+  auto apply = [&](const Staged& s) {
+    for (FactorId r : s.update.removals) {
+      Key l = 0;
+      if (const auto t = stagedTies.find(r); t != stagedTies.end())
+        l = t->second;
+      else if (const auto f = live_.find(r); f != live_.end())
+        l = ownerTiedLandmark(*f->second);
+      if (l != 0) --delta[l];
+    }
+    for (const auto& f : s.update.factors)
+      if (const Key l = ownerTiedLandmark(*f)) {
+        ++delta[l];
+        stagedTies[f->id()] = l;
+      }
+  };
+  for (const Staged& s : staged_) apply(s);
+  if (building) apply(*building);
+  return [this, delta = std::move(delta)](Key l) {
+    const auto c = ownerTies_.find(l);
+    const auto d = delta.find(l);
+    return (c == ownerTies_.end() ? 0 : c->second) + (d == delta.end() ? 0 : d->second) > 0;
+  };
+}
+
 std::map<std::uint32_t, std::uint32_t> Engine::frameGroups(const loopd::factor_batch_t& b) const {
   // From the certain inter-robot factors themselves (not robots_' parents, which regroup()
   // updates only after a round), so the answer depends on the order of batches alone, not on
@@ -116,7 +144,7 @@ std::map<std::uint32_t, std::uint32_t> Engine::frameGroups(const loopd::factor_b
     if (isInterRobot(f))
       joins.emplace_back(static_cast<std::uint32_t>(f.keys[0].robot),
                          static_cast<std::uint32_t>(f.keys[1].robot));
-  return frameGroupsOf(edges, joins);
+  return frameGroupsOf(edges, ownerTiesAt(nullptr), joins);
 }
 
 std::uint32_t Engine::root(std::uint32_t r) const {

@@ -20,10 +20,12 @@
 // anchors it becomes an AnchoredPosePoint/BearingRange factor on (A_r, x_r, A_s, l_s). One
 // sighting leaves the rotation between the frames free, so a pair's sightings are kept back
 // (pending_, engine_sightings.cpp) until another factor joins the two frames or they name
-// enough distinct landmarks to fix the transform (2 in 2D, 3 in 3D); the joining robot's
-// anchor then starts at the least-squares alignment of those landmarks. A sighting of a
-// landmark nobody has placed yet is kept back the same way (it does not hold its batch) and,
-// once the frames are joined, places it in s's frame through the anchors.
+// enough distinct landmarks fixed in s's frame to fix the transform (2 in 2D, 3 in 3D); the
+// joining robot's anchor then starts at the least-squares alignment of those landmarks. A
+// sighting of a landmark nobody has placed yet is kept back the same way (it does not hold its
+// batch) and, once the frames are joined, places it in s's frame through the anchors. Such a
+// landmark relates no frames until s ties it (ownerTies_): then the groups it joins merge, and
+// removing the tie, like removing an inter-robot factor, regroups the robots.
 //
 // An ambiguous alternative never creates an anchor (under "none" or another alternative it
 // would be unconstrained, and each alternative implies another anchor value): an inter-robot
@@ -47,6 +49,7 @@
 #include "loopd/factor_batch_t.hpp"
 #include "robust/per_factor_backend.h"
 #include "server/batch_validator.h"
+#include "server/frame_groups.h"
 #include "server/journal.h"
 #include "server/publisher.h"
 #include "server/session_table.h"
@@ -222,6 +225,13 @@ class Engine : private GraphView {
   bool dropPendingSighting(FactorId id);
   /// The inter-robot edges of the graph with the staged rounds (and `building`) applied.
   std::map<FactorId, InterEdge> currentInterEdges(const Staged* building) const;
+  /// Which landmarks their owners tie to their own frames (ownerTiedLandmark), with the staged
+  /// rounds (and `building`) applied: a landmark relates its owner's frame to a sighter's only
+  /// when tied, or sighted from the owner's group.
+  OwnerTies ownerTiesAt(const Staged* building) const;
+  /// When the batch's factors on landmarks (an owner's tie, a sighting within a group) make
+  /// landmarks join anchored groups (frame_groups.h), merges them: one root prior stays.
+  void mergeGroupsJoinedByLandmarks(Staged& st);
   FactorPtr priorAt(Key k, const Values& from, int slot, double information);
   FactorId newFactorId() { return nextFactorId_++; }
 
@@ -273,7 +283,8 @@ class Engine : private GraphView {
   std::unordered_map<FactorId, std::pair<int, double>> lastGroupDecisions_;
   FactorId nextFactorId_ = 1;
   std::int64_t loopClosures_ = 0;
-  std::map<FactorId, InterEdge> interEdges_;                   // anchored factors
+  std::map<FactorId, InterEdge> interEdges_;  // anchored factors
+  std::map<Key, int> ownerTies_;  // landmark → live factors of its owner's that tie it there
   std::map<RobotPair, std::vector<PendingSighting>> pending_;  // sightings waiting for a join
   bool regroupNeeded_ = false;
 

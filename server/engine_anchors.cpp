@@ -90,10 +90,12 @@ void Engine::joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const S
 }
 
 void Engine::regroup(std::vector<Key>& moved) {
-  // Inter-robot factors were removed: recompute the groups of joined robots from the live ones;
-  // a group left without a root prior gets one (at its current value) on its lowest robot.
+  // Inter-robot factors (or an owner's ties of landmarks others sight) were removed: recompute
+  // the groups of joined robots from the live ones; a group left without a root prior gets one
+  // (at its current value) on its lowest robot.
   regroupNeeded_ = false;
-  const std::map<std::uint32_t, std::uint32_t> groups = frameGroupsOf(interEdges_);
+  const std::map<std::uint32_t, std::uint32_t> groups =
+      frameGroupsOf(interEdges_, ownerTiesAt(nullptr));
   std::map<std::uint32_t, std::uint32_t> parent;  // anchored robot → its group's root
   for (auto& [r, info] : robots_)
     if (info.anchored) parent[r] = groups.count(r) ? groups.at(r) : r;

@@ -288,6 +288,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     st.owners.push_back(owner);
   }
   stageSightings(sightings, st);
+  mergeGroupsJoinedByLandmarks(st);
   // Ambiguous groups: each alternative is built like a factor_t and gets an internal id of
   // its own; the group's internal id is what the sender's id maps to. An inter-robot
   // alternative goes through the anchors of its robots, which certain inter-robot factors
@@ -394,6 +395,13 @@ void Engine::undo(Staged& s) {
 void Engine::commit(Staged& s) {
   for (FactorId r : s.update.removals) {
     if (interEdges_.erase(r)) regroupNeeded_ = true;
+    if (const auto f = live_.find(r); f != live_.end())
+      if (const Key l = ownerTiedLandmark(*f->second); l != 0 && --ownerTies_[l] <= 0) {
+        ownerTies_.erase(l);
+        // Other robots' sightings of it may have been all that joined their frames to its owner's.
+        const auto owner = robots_.find(keyRobot(l));
+        if (owner != robots_.end() && owner->second.anchored) regroupNeeded_ = true;
+      }
     live_.erase(r);
     auto it = owners_.find(r);
     if (it != owners_.end()) {
@@ -406,6 +414,7 @@ void Engine::commit(Staged& s) {
     const FactorPtr& f = s.update.factors[i];
     live_[f->id()] = f;
     if (isAnchored(*f)) interEdges_[f->id()] = interEdgeOf(*f);
+    if (const Key l = ownerTiedLandmark(*f)) ++ownerTies_[l];
     if (s.owners[i].id >= 0) {
       owners_[f->id()] = s.owners[i];
       if (s.owners[i].uncertain) ++loopClosures_;

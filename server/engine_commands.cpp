@@ -116,6 +116,7 @@ void Engine::resetAll() {
   lastGroupDecisions_.clear();
   loopClosures_ = 0;
   interEdges_.clear();
+  ownerTies_.clear();
   pending_.clear();
   staged_.clear();
   stagedValues_ = Values();

@@ -2,16 +2,18 @@
 // relates r's frame to s's. Through the robots' anchors it is an ordinary factor once the two
 // frames are joined. A sighting cannot join them alone (one point leaves the rotation between
 // the frames free, and the solver would meet a singular system), so a pair's sightings are
-// kept back until another factor joins the frames or they reach enough distinct landmarks to
-// fix the transform (frame_groups.h); the newcomer's anchor then starts at the least-squares
-// alignment of the landmarks as each robot places them (frame_alignment.h). Any robot may
-// introduce a landmark: a sighting of one its owner has not sent is kept back too, and places
-// it through the anchors once the frames are joined (holding the batch instead held every later
-// batch of the robot behind it).
+// kept back until another factor joins the frames or they reach enough distinct landmarks fixed
+// in s's frame to fix the transform (frame_groups.h); the newcomer's anchor then starts at the
+// least-squares alignment of the landmarks as each robot places them (frame_alignment.h). Any
+// robot may introduce a landmark: a sighting of one its owner has not sent is kept back too,
+// and places it through the anchors once the frames are joined (holding the batch instead held
+// every later batch of the robot behind it). Such a landmark fixes nothing between the frames
+// until its owner ties it (mergeGroupsJoinedByLandmarks).
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cmath>
+#include <set>
 
 #include "server/engine.h"
 #include "server/frame_alignment.h"
@@ -44,12 +46,14 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
     const Values* v = holder(k);
     return {v, v->slot(k)};
   };
+  if (pending_.empty()) return;
   auto groupOf = [](const std::map<std::uint32_t, std::uint32_t>& groups, std::uint32_t r) {
     const auto g = groups.find(r);
     return g == groups.end() ? r : g->second;
   };
+  const OwnerTies ties = ownerTiesAt(&st);
   // The frame groups, recomputed only after a join changed them.
-  std::map<std::uint32_t, std::uint32_t> groups = frameGroupsOf(currentInterEdges(&st));
+  std::map<std::uint32_t, std::uint32_t> groups = frameGroupsOf(currentInterEdges(&st), ties);
   for (auto it = pending_.begin(); it != pending_.end();) {
     const auto [a, b] = it->first;
     if (groupOf(groups, a) != groupOf(groups, b)) {
@@ -57,17 +61,24 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
         ++it;
         continue;
       }
-      // Would the pair's sightings join the frames on their own (enough distinct landmarks)?
-      // The rule frameGroupsOf applies to them once anchored.
-      // Only landmarks with a value count: one nobody has introduced cannot align the frames.
-      auto placed = [&](const PendingSighting& p) { return known(p.factor->key(1)); };
-      std::map<FactorId, InterEdge> own;
+      // Would the pair's sightings join the frames (the rule frameGroupsOf applies to them once
+      // anchored)? Only landmarks fixed in their owner's group count: one nobody has placed,
+      // or only other robots sight, cannot align the frames.
+      std::map<FactorId, InterEdge> edges = currentInterEdges(&st);
+      std::set<Key> sightedInGroup;  // landmarks some robot of their owner's group sights
+      for (const auto& [id, e] : edges)
+        if (e.landmark != 0 && groupOf(groups, e.r) == groupOf(groups, e.s))
+          sightedInGroup.insert(e.landmark);
+      auto counts = [&](const PendingSighting& p) {
+        const Key l = p.factor->key(1);
+        return known(l) && (ties(l) || sightedInGroup.count(l));
+      };
       for (const PendingSighting& p : it->second)
-        if (placed(p))
-          own[p.factor->id()] =
+        if (counts(p))
+          edges[p.factor->id()] =
               interEdgeOf(p.factor->key(0), p.factor->key(1), p.factor->varType(1));
-      const std::map<std::uint32_t, std::uint32_t> byOwn = frameGroupsOf(own);
-      if (groupOf(byOwn, a) != groupOf(byOwn, b)) {
+      const std::map<std::uint32_t, std::uint32_t> withPair = frameGroupsOf(edges, ties);
+      if (groupOf(withPair, a) != groupOf(withPair, b)) {
         ++it;
         continue;
       }
@@ -76,7 +87,7 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       std::vector<PointPair2> pairs2;
       std::vector<PointPair3> pairs3;
       for (const PendingSighting& p : it->second) {
-        if (!placed(p)) continue;
+        if (!counts(p)) continue;
         const Factor& f = *p.factor;
         const auto [pv, ps] = valueSlot(f.key(0));
         const auto [lv, ls] = valueSlot(f.key(1));
@@ -119,15 +130,37 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       st.owners.push_back(p.owner);
     }
     it = pending_.erase(it);
-    if (joined) groups = frameGroupsOf(currentInterEdges(&st));
+    if (joined) groups = frameGroupsOf(currentInterEdges(&st), ties);
   }
   // Once per pair until it is joined (at info: a front-end's sightings not in the map yet).
   for (const auto& [pair, landmark] : firstKeptBack)
     if (pending_.count(pair))
       spdlog::info(
           "sightings between robots {} and {} (first: {}) are kept back until a loop closure "
-          "joins their frames or they name enough placed landmarks (2 in 2D, 3 in 3D)",
+          "joins their frames or they name enough landmarks their owners' groups sight too (2 in "
+          "2D, "
+          "3 in 3D)",
           pair.first, pair.second, keyToString(landmark));
+}
+
+void Engine::mergeGroupsJoinedByLandmarks(Staged& st) {
+  // Only where two anchored groups exist (every robot an edge names is anchored: anchored
+  // factors exist only between anchored ones) and the batch adds a factor on a landmark.
+  std::set<std::uint32_t> roots;
+  for (const auto& [r, info] : robots_)
+    if (info.anchored) roots.insert(root(r));
+  if (roots.size() < 2) return;
+  const bool onALandmark =
+      std::any_of(st.update.factors.begin(), st.update.factors.end(), [](const FactorPtr& f) {
+        return ownerTiedLandmark(*f) != 0 || (isAnchored(*f) && interEdgeOf(*f).landmark != 0);
+      });
+  if (!onALandmark) return;
+  for (const auto& [r, g] : frameGroupsOf(currentInterEdges(&st), ownerTiesAt(&st)))
+    if (root(r) != root(g)) {
+      spdlog::info("robot group of {} joins robot {}'s: enough landmarks both sight are tied",
+                   root(r), root(g));
+      joinRobots(g, r, SE2(), SE3(), st);
+    }
 }
 
 std::set<Key> Engine::landmarksLeftToSightings(const loopd::factor_batch_t& b,

@@ -118,6 +118,13 @@ std::shared_ptr<Factor> anchoredFactor(const Factor& built) {
 
 bool isAnchored(const Factor& f) { return f.size() == 4; }
 
+Key ownerTiedLandmark(const Factor& f) {
+  if (isAnchored(f)) return 0;
+  for (int i = 0; i < f.size(); ++i)
+    if (f.varType(i) == VarType::Point2 || f.varType(i) == VarType::Point3) return f.key(i);
+  return 0;
+}
+
 InterEdge interEdgeOf(Key pose, Key other, VarType otherType) {
   InterEdge e;
   e.r = keyRobot(pose);

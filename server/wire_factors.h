@@ -30,6 +30,9 @@ bool isCrossRobotSighting(const loopd::factor_t& f);
 std::shared_ptr<Factor> anchoredFactor(const Factor& built);
 /// An anchored (inter-robot) factor: the robots it joins are recorded as inter-robot edges.
 bool isAnchored(const Factor& f);
+/// The landmark a factor of its owner's own frame ties there (a sighting from one of the
+/// owner's poses, a prior on it), or 0: anchored factors and factors on poses only tie none.
+Key ownerTiedLandmark(const Factor& f);
 
 /// An anchored factor as an edge between its two robots' frames (frame_groups.h).
 struct InterEdge {

@@ -394,6 +394,127 @@ TEST(EngineSightings, RemovingSightingsDownToOneLandmarkRerootsTheRobot) {
   EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
 }
 
+// The x variance of robot `robot`'s latest pose in the latest automatic covariance message.
+double latestXVariance(const EngineHarness& h, int robot) {
+  for (auto m = h.out.covariances.rbegin(); m != h.out.covariances.rend(); ++m) {
+    if (m->request_id != 0) continue;
+    size_t at = 0;
+    for (int i = 0; i < m->num_keys; ++i) {
+      if (m->keys[static_cast<size_t>(i)].robot == robot) return m->values[at];
+      at += static_cast<size_t>(m->dims[static_cast<size_t>(i)] * m->dims[static_cast<size_t>(i)]);
+    }
+  }
+  ADD_FAILURE() << "no covariance of robot " << robot;
+  return 0.0;
+}
+
+// A closure joins the frames; robot 1 then introduces two landmarks of robot 0's that robot 0
+// has not sighted; the closure is removed. Those landmarks fix nothing between the frames, so
+// robot 1's group gets a root prior. Before, they counted as two shared points: the frames
+// stayed "joined" with nothing fixing the transform, and robot 1's covariance grew to about
+// 10^5 m^2. Once robot 0 sights them, they join the frames and that root prior goes again.
+TEST(EngineSightings, LandmarksOnlyOneRobotSightsDoNotKeepTheFramesJoined) {
+  TwoRobots t(0.7);
+  t.walk();
+  t.w.landmarks.push_back({6, 1});   // landmark 4
+  t.w.landmarks.push_back({1, -3});  // landmark 5
+  const std::int64_t closure =
+      t.r1.loopClosure(KeyRef::pose(0, 2), KeyRef::pose(1, 1),
+                       pose2(t.w.robot0(2).between(t.w.robot1(1))), kInfoPose2);
+  t.r1.flush();
+  t.sight(t.r1, 1, 2, 4);
+  t.sight(t.r1, 1, 3, 5);
+  t.r1.flush();
+  ASSERT_TRUE(t.h.engine.robotJoined(1));
+  ASSERT_EQ(t.anchoredFactors(), 3);
+  const int before = t.h.engine.backend().graph().size();
+  t.r1.remove(closure);
+  t.r1.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_EQ(t.anchoredFactors(), 2);
+  EXPECT_EQ(t.h.engine.backend().graph().size(), before);  // the closure out, a root prior in
+  EXPECT_LT(latestXVariance(t.h, 1), 1.0);
+  t.sight(t.r0, 0, 5, 4);
+  t.sight(t.r0, 0, 5, 5);
+  t.r0.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_EQ(t.h.engine.backend().graph().size(), before + 2 - 1);  // two sightings, no prior
+  EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
+  t.expectWorld(1e-6);
+}
+
+// As above with a third robot: robot 2, joined to robot 0 by a closure, sights the two landmarks
+// robot 1 introduced after robot 1 was split off. They are then fixed in robot 0's group and
+// join robot 1 to it again, so robot 1's root prior goes (before, it stayed: two root priors
+// in one group).
+TEST(EngineSightings, SightingsFromTheOwnersGroupJoinARobotSplitOffAgain) {
+  TwoRobots t(0.7);
+  FactorPublisher r2(
+      [&t](const std::string&, const std::vector<std::uint8_t>& b) { t.h.sendRaw(b); }, "r2",
+      "T_FACTORS");
+  const SE2 t2(-2, 1, -0.4);
+  auto robot2 = [&](int j) { return t2 * t.w.robot1Own(j); };
+  t.walk();
+  t.w.landmarks.push_back({6, 1});   // landmark 4
+  t.w.landmarks.push_back({1, -3});  // landmark 5
+  for (int j = 0; j < 5; ++j) {
+    r2.odometry(2, j, j + 1, pose2(t.w.odometry1()), kInfoPose2);
+    r2.flush();
+  }
+  r2.loopClosure(KeyRef::pose(0, 1), KeyRef::pose(2, 2), pose2(t.w.robot0(1).between(robot2(2))),
+                 kInfoPose2);
+  r2.flush();
+  const std::int64_t closure =
+      t.r1.loopClosure(KeyRef::pose(0, 2), KeyRef::pose(1, 1),
+                       pose2(t.w.robot0(2).between(t.w.robot1(1))), kInfoPose2);
+  t.r1.flush();
+  t.sight(t.r1, 1, 2, 4);
+  t.sight(t.r1, 1, 3, 5);
+  t.r1.flush();
+  ASSERT_TRUE(t.h.engine.robotJoined(1));
+  ASSERT_TRUE(t.h.engine.robotJoined(2));
+  const int before = t.h.engine.backend().graph().size();
+  t.r1.remove(closure);
+  t.r1.flush();
+  EXPECT_EQ(t.h.engine.backend().graph().size(), before);  // the closure out, a root prior in
+  EXPECT_LT(latestXVariance(t.h, 1), 1.0);
+  for (int l = 4; l <= 5; ++l) {
+    const Vec2 z = robot2(l - 1).transformTo(t.w.landmarks[static_cast<size_t>(l)]);
+    r2.landmark(KeyRef::pose(2, l - 1), KeyRef::point(0, l), Eigen::Vector2d(z), kInfo2);
+  }
+  r2.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_EQ(t.h.engine.backend().graph().size(), before + 2 - 1);  // two sightings, no prior
+  EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
+  t.expectWorld(1e-6);
+}
+
+// The frames were joined by landmarks 0 and 4; robot 0's one sighting of landmark 4 is removed.
+// Landmark 4 then fixes nothing between the frames: robot 1 is rerooted as when its own
+// sightings go (before, removing the owner's sighting regrouped nothing).
+TEST(EngineSightings, RemovingTheOwnersOnlySightingOfALandmarkRerootsTheRobot) {
+  TwoRobots t(1.0);
+  t.walk();
+  t.w.landmarks.push_back({6, 1});  // landmark 4
+  const std::int64_t tie = t.sight(t.r0, 0, 3, 4);
+  t.r0.flush();
+  t.sight(t.r1, 1, 2, 0);
+  t.sight(t.r1, 1, 3, 4);
+  t.r1.flush();
+  ASSERT_TRUE(t.h.engine.robotJoined(1));
+  ASSERT_EQ(t.anchoredFactors(), 2);
+  const int before = t.h.engine.backend().graph().size();
+  t.r0.remove(tie);
+  t.r0.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_EQ(t.h.engine.backend().graph().size(), before);  // the sighting out, a root prior in
+  EXPECT_LT(latestXVariance(t.h, 1), 1.0);
+  t.r1.odometry(1, 5, 6, pose2(t.w.odometry1()), kInfoPose2);
+  t.r1.flush();
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
+}
+
 // 3D: two landmarks leave the rotation about the line through them free; the third fixes it.
 TEST(EngineSightings, ThreeDimensionalSightingsJoinOnTheThirdLandmark) {
   EngineHarness h("isam2");
