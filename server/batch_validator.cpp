@@ -375,6 +375,13 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
       return;
     }
     seen.emplace(k, t);
+    if (keyKind(k) == KeyKind::Pose && g.isLandmarkNamespace(keyRobot(k))) {
+      out.push_back({id, E::WRONG_KEY_KIND,
+                     what + ": " + keyToString(k) + " is a pose of robot " +
+                         std::to_string(keyRobot(k)) +
+                         ", a landmark namespace (--landmark-namespace): landmarks only"});
+      return;
+    }
     if (keyKind(k) == KeyKind::Pose) {
       std::optional<VarType> rt = g.robotPoseType(keyRobot(k));
       auto jt = robotType.find(keyRobot(k));
@@ -396,7 +403,21 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
       for (int i = 0; i < f.num_keys; ++i)
         use(toKey(f.keys[static_cast<size_t>(i)]), slotVarType(f.type, i), a.id,
             "ambiguous " + std::to_string(a.id) + " " + itemName(f, a.id));
-  // Inter-robot alternatives: an alternative cannot create the anchor that joins two robots'
+  // A landmark namespace's landmarks have no frame until a robot's sighting adopts one for them
+  // (engine.h), so a prior cannot say where one is.
+  auto namespacePrior = [&](const F& f, std::int64_t id, const std::string& what) {
+    if ((f.type == F::PRIOR_POINT2 || f.type == F::PRIOR_POINT3) &&
+        g.isLandmarkNamespace(static_cast<std::uint32_t>(f.keys[0].robot)))
+      out.push_back({id, E::INVALID_FIELD,
+                     what + ": a prior on " + keyToString(toKey(f.keys[0])) +
+                         ", a landmark of a landmark namespace (--landmark-namespace): its "
+                         "landmarks are placed by sightings only"});
+  };
+  for (const auto& f : b.factors) namespacePrior(f, f.id, itemName(f, f.id));
+  for (const auto& a : b.ambiguous)
+    for (const auto& f : a.alternatives)
+      namespacePrior(f, a.id, "ambiguous " + std::to_string(a.id) + " " + itemName(f, a.id));
+  // Inter-robot alternatives: an alternative cannot create the anchor that joins two robots''
   // frames (under "none" or another alternative the anchor would be unconstrained, and each
   // alternative implies another anchor value), so its robots must already share a frame
   // through certain inter-robot factors (earlier ones or this batch's own).
@@ -408,10 +429,12 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
   for (const auto& a : b.ambiguous)
     for (size_t i = 0; i < a.alternatives.size(); ++i) {
       const F& f = a.alternatives[i];
-      if (f.num_keys != 2 || f.keys[0].robot == f.keys[1].robot) continue;
-      if (!frames) frames = g.frameGroups(b);
+      if (f.num_keys != 2) continue;
       const auto r = static_cast<std::uint32_t>(f.keys[0].robot);
-      const auto s = static_cast<std::uint32_t>(f.keys[1].robot);
+      auto s = static_cast<std::uint32_t>(f.keys[1].robot);
+      if (keyKind(toKey(f.keys[1])) == KeyKind::Landmark) s = g.landmarkFrame(s);
+      if (r == s) continue;
+      if (!frames) frames = g.frameGroups(b);
       if (frameOf(r) == frameOf(s)) continue;
       out.push_back({a.id, E::INVALID_FIELD,
                      "ambiguous " + std::to_string(a.id) + " alternative " + std::to_string(i) +

@@ -44,6 +44,11 @@ class GraphView {
       const loopd::factor_batch_t& /*batch*/) const {
     return {};
   }
+  /// Whether a robot id names a landmark namespace (landmarks only: a pose there is refused).
+  virtual bool isLandmarkNamespace(std::uint32_t /*robot*/) const { return false; }
+  /// The robot whose frame robot `robot`'s landmarks live in: itself, or the robot that
+  /// adopted a landmark namespace.
+  virtual std::uint32_t landmarkFrame(std::uint32_t robot) const { return robot; }
 };
 
 class FactorBatchValidator {

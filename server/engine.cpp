@@ -147,6 +147,31 @@ std::map<std::uint32_t, std::uint32_t> Engine::frameGroups(const loopd::factor_b
   return frameGroupsOf(edges, ownerTiesAt(nullptr), joins);
 }
 
+std::uint32_t Engine::landmarkFrame(std::uint32_t robot) const {
+  const auto a = adopted_.find(robot);
+  return a == adopted_.end() ? robot : a->second;
+}
+
+std::map<std::uint32_t, std::uint32_t> Engine::adoptionsOf(const loopd::factor_batch_t& b) const {
+  std::map<std::uint32_t, std::uint32_t> out;
+  for (const auto& f : b.factors) {
+    if (!isSighting(f)) continue;  // (a prior has one key)
+    const auto ns = static_cast<std::uint32_t>(f.keys[1].robot);
+    if (isLandmarkNamespace(ns) && !adopted_.count(ns))
+      out.emplace(ns, static_cast<std::uint32_t>(f.keys[0].robot));
+  }
+  return out;
+}
+
+bool Engine::isCrossFrameSighting(const loopd::factor_t& f,
+                                  const std::map<std::uint32_t, std::uint32_t>& adoptions) const {
+  if (!isSighting(f)) return false;
+  const auto robot = static_cast<std::uint32_t>(f.keys[1].robot);
+  const auto a = adoptions.find(robot);
+  return static_cast<std::uint32_t>(f.keys[0].robot) !=
+         (a == adoptions.end() ? landmarkFrame(robot) : a->second);
+}
+
 std::uint32_t Engine::root(std::uint32_t r) const {
   for (int guard = 0; guard < 1 << 20; ++guard) {
     auto it = robots_.find(r);

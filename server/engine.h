@@ -73,6 +73,9 @@ struct EngineOptions {
   // from odometry, solved in one step, can land in another basin than one pose at a time does
   // (Victoria Park fed at full speed: rounds of thousands of poses ended at χ² 10⁵–10⁶).
   int posesPerUpdate = 100;
+  // Robot ids that name landmark namespaces (--landmark-namespace): landmarks only, no poses;
+  // the first robot to sight one of a namespace's landmarks holds them all in its frame.
+  std::set<std::uint32_t> landmarkNamespaces;
 };
 
 struct Inbound {
@@ -166,6 +169,7 @@ class Engine : private GraphView {
     std::vector<Group> groups;  // parallel to update.ambiguous
     std::vector<FactorId> groupRemovals;  // internal ids of ambiguous groups removed
     std::map<RobotPair, std::vector<PendingSighting>> pendingBefore;
+    std::map<std::uint32_t, std::uint32_t> adoptedBefore;
   };
   struct Held {
     Decoded d;
@@ -180,6 +184,10 @@ class Engine : private GraphView {
   bool idUsed(const std::string& sender, std::int64_t id) const override;
   bool idLive(const std::string& sender, std::int64_t id) const override;
   std::map<std::uint32_t, std::uint32_t> frameGroups(const loopd::factor_batch_t& b) const override;
+  bool isLandmarkNamespace(std::uint32_t robot) const override {
+    return opt_.landmarkNamespaces.count(robot) > 0;
+  }
+  std::uint32_t landmarkFrame(std::uint32_t robot) const override;
   std::string solver() const override { return backend_->name(); }
   std::unique_ptr<PerFactorRobustBackend> makeSolver(const std::string& name) const;
 
@@ -216,11 +224,19 @@ class Engine : private GraphView {
   /// r ≠ s, at known or guessed poses) refer to: they do not hold the batch. The sightings are
   /// kept back as any other until r's and s's frames are joined, and then place the landmark.
   /// Keys of ambiguous alternatives are not among them (those must exist).
-  std::set<Key> landmarksLeftToSightings(const loopd::factor_batch_t& b, const Values& knownVals,
-                                         const Values& guess) const;
+  std::set<Key> landmarksLeftToSightings(
+      const loopd::factor_batch_t& b, const Values& knownVals, const Values& guess,
+      const std::map<std::uint32_t, std::uint32_t>& adoptions) const;
   /// Initialises the landmark of sighting `f` (when it has no value yet) where the sighting puts
   /// it, in its owner's frame: A_s⁻¹·A_r·(x_r ⊕ z).
   void placeSightedLandmark(const Factor& f, Staged& st);
+  /// A landmark namespace not adopted yet is adopted by the robot of the batch's first sighting
+  /// of one of its landmarks (`adoptions`: those the batch makes, before it is staged).
+  std::map<std::uint32_t, std::uint32_t> adoptionsOf(const loopd::factor_batch_t& b) const;
+  /// A sighting whose landmark lives in another robot's frame than its pose (`adoptions`: the
+  /// batch's own, from adoptionsOf).
+  bool isCrossFrameSighting(const loopd::factor_t& f,
+                            const std::map<std::uint32_t, std::uint32_t>& adoptions) const;
   /// Removes a kept-back sighting; false if `id` is not one.
   bool dropPendingSighting(FactorId id);
   /// The inter-robot edges of the graph with the staged rounds (and `building`) applied.
@@ -285,6 +301,7 @@ class Engine : private GraphView {
   std::int64_t loopClosures_ = 0;
   std::map<FactorId, InterEdge> interEdges_;  // anchored factors
   std::map<Key, int> ownerTies_;  // landmark → live factors of its owner's that tie it there
+  std::map<std::uint32_t, std::uint32_t> adopted_;  // landmark namespace → its frame's robot
   std::map<RobotPair, std::vector<PendingSighting>> pending_;  // sightings waiting for a join
   bool regroupNeeded_ = false;
 

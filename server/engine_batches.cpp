@@ -192,20 +192,22 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
         guess.insert(k, SE2());
     }
 
-  // Solver factors; inter-robot ones are built once anchors are known.
+  // Solver factors; inter-robot ones are built once anchors are known. A landmark namespace's
+  // first sighting adopts the sighting robot's frame for it (engine.h).
+  const std::map<std::uint32_t, std::uint32_t> adoptions = adoptionsOf(b);
   std::vector<std::shared_ptr<Factor>> built(b.factors.size());
   std::vector<FactorPtr> intra;
   for (size_t i = 0; i < b.factors.size(); ++i) {
     built[i] = buildFactor(b.factors[i]);
     // Inter-robot factors relate two frames: they do not predict values in one.
-    if (!isInterRobot(b.factors[i]) && !isCrossRobotSighting(b.factors[i]))
+    if (!isInterRobot(b.factors[i]) && !isCrossFrameSighting(b.factors[i], adoptions))
       intra.push_back(built[i]);
   }
   predictMissingValues(intra, knownVals, guess);
   // A landmark of robot s that robot r ≠ s sights first does not hold the batch (and every
   // later one of r's behind it): the sighting is kept back until the frames are joined, and
   // then places the landmark through the anchors (stageSightings).
-  const std::set<Key> leftToSightings = landmarksLeftToSightings(b, knownVals, guess);
+  const std::set<Key> leftToSightings = landmarksLeftToSightings(b, knownVals, guess, adoptions);
   for (Key k : keys)
     if (!knownVals.contains(k) && !guess.contains(k) && !leftToSightings.count(k))
       waiting.push_back(k);
@@ -217,6 +219,13 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   st.d = d;
   st.robotsBefore = robots_;
   st.pendingBefore = pending_;
+  st.adoptedBefore = adopted_;
+  for (const auto& [ns, r] : adoptions) {
+    adopted_.emplace(ns, r);
+    spdlog::info(
+        "landmark namespace {}: its landmarks live in robot {}'s frame (the first to sight one)",
+        ns, r);
+  }
   BackendUpdate& u = st.update;
   for (int s = 0; s < guess.size(); ++s) {
     u.initial.insertFrom(guess, s);
@@ -280,7 +289,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     sessions_.addId(b.sender, wf.id, id);
     st.addedIds.emplace_back(wf.id, id);
     const Owner owner{b.sender, wf.id, isUncertain(f->role())};
-    if (isCrossRobotSighting(wf)) {
+    if (isCrossFrameSighting(wf, {})) {
       sightings.emplace_back(f, owner);
       continue;
     }
@@ -302,7 +311,10 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     g.factor.nullWeight = wa.null_hypothesis && wa.null_weight > 0.0 ? wa.null_weight : 1.0;
     for (const auto& wf : wa.alternatives) {
       std::shared_ptr<Factor> f = buildFactor(wf);
-      if (isInterRobot(wf) || isCrossRobotSighting(wf)) f = anchoredFactor(*f);
+      if (isInterRobot(wf))
+        f = anchoredFactor(*f);
+      else if (isCrossFrameSighting(wf, {}))
+        f = anchoredFactor(*f, landmarkFrame(static_cast<std::uint32_t>(wf.keys[1].robot)));
       f->setId(newFactorId());
       f->setRobustRequest({wf.robust, wf.robust_param});  // applies once flattened
       g.factor.alternatives.push_back(std::move(f));
@@ -390,6 +402,7 @@ void Engine::undo(Staged& s) {
   for (const auto& [id, fid] : s.addedIds) sessions_.undoAdd(sender, id);
   robots_ = s.robotsBefore;
   pending_ = s.pendingBefore;
+  adopted_ = s.adoptedBefore;
 }
 
 void Engine::commit(Staged& s) {
@@ -399,7 +412,7 @@ void Engine::commit(Staged& s) {
       if (const Key l = ownerTiedLandmark(*f->second); l != 0 && --ownerTies_[l] <= 0) {
         ownerTies_.erase(l);
         // Other robots' sightings of it may have been all that joined their frames to its owner's.
-        const auto owner = robots_.find(keyRobot(l));
+        const auto owner = robots_.find(landmarkFrame(keyRobot(l)));
         if (owner != robots_.end() && owner->second.anchored) regroupNeeded_ = true;
       }
     live_.erase(r);

@@ -117,6 +117,7 @@ void Engine::resetAll() {
   loopClosures_ = 0;
   interEdges_.clear();
   ownerTies_.clear();
+  adopted_.clear();
   pending_.clear();
   staged_.clear();
   stagedValues_ = Values();

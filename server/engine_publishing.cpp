@@ -58,6 +58,9 @@ void Engine::publishEstimates(const std::vector<Key>* moved, std::int64_t reques
         keysOf[keyRobot(k)].push_back(k);
     }
   }
+  // A landmark namespace moves with the robot whose frame it lives in.
+  for (const auto& [ns, r] : adopted_)
+    if (full.count(r)) full.insert(ns);
   if (!full.empty())
     for (int s = 0; s < est.size(); ++s) {
       const Key k = est.key(s);
@@ -67,25 +70,26 @@ void Engine::publishEstimates(const std::vector<Key>* moved, std::int64_t reques
     }
   for (auto& [r, keys] : keysOf) {
     if (onlyRobot >= 0 && static_cast<int>(r) != onlyRobot) continue;
-    auto rit = robots_.find(r);
+    const std::uint32_t fr = landmarkFrame(r);  // r, or the robot a namespace lives with
+    auto rit = robots_.find(fr);
     RobotEstimate e;
     e.robot = static_cast<std::int32_t>(r);
     e.hypothesis = hypothesis;
     e.fullSnapshot = full.count(r) > 0 && !moved ? true : full.count(r) > 0;
     e.se3 = rit != robots_.end() && rit->second.poseType == VarType::SE3;
     const bool anchored =
-        rit != robots_.end() && rit->second.anchored && est.contains(anchorKey(r));
+        rit != robots_.end() && rit->second.anchored && est.contains(anchorKey(fr));
     e.commonFrame = anchored;
-    e.frameRobot = static_cast<std::int32_t>(anchored ? root(r) : r);
+    e.frameRobot = static_cast<std::int32_t>(anchored ? root(fr) : fr);
     std::sort(keys.begin(), keys.end());
     keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
     SE2 A2;
     SE3 A3;
     if (anchored) {
       if (e.se3)
-        A3 = se3Of(est, anchorKey(r));
+        A3 = se3Of(est, anchorKey(fr));
       else
-        A2 = se2Of(est, anchorKey(r));
+        A2 = se2Of(est, anchorKey(fr));
     }
     for (Key k : keys) {
       const int s = est.slot(k);
@@ -132,7 +136,8 @@ Eigen::MatrixXd Engine::commonFrameCovariance(const std::vector<Key>& keys) {
   std::vector<Key> vars = keys;
   std::vector<int> anchorCol(keys.size(), -1);
   for (size_t i = 0; i < keys.size(); ++i) {
-    const std::uint32_t r = keyRobot(keys[i]);
+    const std::uint32_t r = keyKind(keys[i]) == KeyKind::Landmark ? landmarkFrame(keyRobot(keys[i]))
+                                                                  : keyRobot(keys[i]);
     if (!robotJoined(r) || !est.contains(anchorKey(r))) continue;
     auto it = std::find(vars.begin(), vars.end(), anchorKey(r));
     if (it == vars.end()) {

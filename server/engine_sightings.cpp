@@ -37,7 +37,7 @@ Vec2 sightedPoint2(const Factor& f) {
 void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings, Staged& st) {
   std::map<RobotPair, Key> firstKeptBack;  // pairs with nothing kept back before this batch
   for (const auto& [f, owner] : sightings) {
-    const RobotPair pair = std::minmax(keyRobot(f->key(0)), keyRobot(f->key(1)));
+    const RobotPair pair = std::minmax(keyRobot(f->key(0)), landmarkFrame(keyRobot(f->key(1))));
     std::vector<PendingSighting>& list = pending_[pair];
     if (list.empty()) firstKeptBack.emplace(pair, f->key(1));
     list.push_back({f, owner});
@@ -76,7 +76,8 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       for (const PendingSighting& p : it->second)
         if (counts(p))
           edges[p.factor->id()] =
-              interEdgeOf(p.factor->key(0), p.factor->key(1), p.factor->varType(1));
+              interEdgeOf(p.factor->key(0), p.factor->key(1), p.factor->varType(1),
+                          landmarkFrame(keyRobot(p.factor->key(1))));
       const std::map<std::uint32_t, std::uint32_t> withPair = frameGroupsOf(edges, ties);
       if (groupOf(withPair, a) != groupOf(withPair, b)) {
         ++it;
@@ -126,7 +127,8 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
     const bool joined = groupOf(groups, a) != groupOf(groups, b);
     for (const PendingSighting& p : it->second) {
       placeSightedLandmark(*p.factor, st);
-      st.update.factors.push_back(anchoredFactor(*p.factor));
+      st.update.factors.push_back(
+          anchoredFactor(*p.factor, landmarkFrame(keyRobot(p.factor->key(1)))));
       st.owners.push_back(p.owner);
     }
     it = pending_.erase(it);
@@ -134,13 +136,21 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
   }
   // Once per pair until it is joined (at info: a front-end's sightings not in the map yet).
   for (const auto& [pair, landmark] : firstKeptBack)
-    if (pending_.count(pair))
+    if (pending_.count(pair)) {
+      const std::uint32_t owner = keyRobot(landmark);
+      const std::string noPoses =
+          robots_.count(owner) || isLandmarkNamespace(owner)
+              ? ""
+              : "; robot " + std::to_string(owner) +
+                    " has sent no poses: if it names a shared landmark map, run "
+                    "loopd with --landmark-namespace " +
+                    std::to_string(owner);
       spdlog::info(
           "sightings between robots {} and {} (first: {}) are kept back until a loop closure "
           "joins their frames or they name enough landmarks their owners' groups sight too (2 in "
-          "2D, "
-          "3 in 3D)",
-          pair.first, pair.second, keyToString(landmark));
+          "2D, 3 in 3D){}",
+          pair.first, pair.second, keyToString(landmark), noPoses);
+    }
 }
 
 void Engine::mergeGroupsJoinedByLandmarks(Staged& st) {
@@ -163,11 +173,12 @@ void Engine::mergeGroupsJoinedByLandmarks(Staged& st) {
     }
 }
 
-std::set<Key> Engine::landmarksLeftToSightings(const loopd::factor_batch_t& b,
-                                               const Values& knownVals, const Values& guess) const {
+std::set<Key> Engine::landmarksLeftToSightings(
+    const loopd::factor_batch_t& b, const Values& knownVals, const Values& guess,
+    const std::map<std::uint32_t, std::uint32_t>& adoptions) const {
   std::set<Key> left;
   for (const auto& wf : b.factors) {
-    if (!isCrossRobotSighting(wf)) continue;
+    if (!isCrossFrameSighting(wf, adoptions)) continue;
     const Key x = toKey(wf.keys[0]), l = toKey(wf.keys[1]);
     if (!knownVals.contains(l) && !guess.contains(l) &&
         (knownVals.contains(x) || guess.contains(x)))
@@ -184,7 +195,7 @@ void Engine::placeSightedLandmark(const Factor& f, Staged& st) {
   if (known(l)) return;  // earlier sightings (or the staged rounds) placed it
   // Every value it needs is known or staged (this batch's guesses and new anchors included).
   auto at = [&](Key k) -> const Values& { return *holder(k); };
-  const std::uint32_t r = keyRobot(x), s = keyRobot(l);
+  const std::uint32_t r = keyRobot(x), s = landmarkFrame(keyRobot(l));
   const Key ar = anchorKey(r), as = anchorKey(s);
   Values one;
   if (f.varType(1) == VarType::Point3) {

@@ -24,6 +24,7 @@ std::map<std::uint32_t, std::uint32_t> frameGroupsOf(
   // distinct landmarks fix a pair of frames.
   struct Landmark {
     std::set<std::uint32_t> robots;
+    std::uint32_t owner = 0;  // the robot whose frame it lives in
     int needed = 0;
   };
   std::map<Key, Landmark> landmarks;
@@ -36,11 +37,12 @@ std::map<std::uint32_t, std::uint32_t> frameGroupsOf(
     }
     Landmark& l = landmarks[e.landmark];
     l.robots.insert(e.r);
+    l.owner = e.s;
     l.needed = std::max(l.needed, e.needed);
   }
   for (const auto& [r, s] : extraJoins) join(r, s);
   for (auto& [key, l] : landmarks)
-    if (tiedToOwner(key)) l.robots.insert(keyRobot(key));
+    if (tiedToOwner(key)) l.robots.insert(l.owner);
   for (bool joined = true; joined;) {
     joined = false;
     // Per unordered pair of groups: the landmarks fixed in both, and how many are needed.

@@ -17,7 +17,8 @@
 
 namespace loopd::server {
 
-/// Whether a landmark's owner ties it to its own frame with factors of its own.
+/// Whether a landmark's owner (the robot whose frame it lives in: InterEdge::s) ties it to its
+/// own frame with factors of its own.
 using OwnerTies = std::function<bool(Key landmark)>;
 
 /// Robot → the lowest robot of its group, for every robot an edge or `extraJoins` names.

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <stdexcept>
 
@@ -24,10 +25,10 @@ std::string trim(const std::string& s) {
   return s.substr(b, e - b + 1);
 }
 
-const char* const kKeys[] = {"lcm-url",  "solver",        "channel-prefix", "journal",
-                             "resume",   "publish-every", "log-level",      "hold-seconds",
-                             "hold-max", "idle-seconds",  "max-hypotheses", "poses-per-update",
-                             "config"};
+const char* const kKeys[] = {
+    "lcm-url",        "solver",           "channel-prefix",     "journal",  "resume",
+    "publish-every",  "log-level",        "hold-seconds",       "hold-max", "idle-seconds",
+    "max-hypotheses", "poses-per-update", "landmark-namespace", "config"};
 
 // The ranges of the numeric flags (serverUsage() and README name them).
 constexpr int kMaxCount = 1000000;       // --publish-every, --hold-max, --poses-per-update
@@ -99,6 +100,19 @@ void apply(ServerConfig& c, const std::string& k, const std::string& v) {
     c.maxHypotheses = toInt(k, v, 1, kMaxHypotheses);
   else if (k == "poses-per-update")
     c.posesPerUpdate = toInt(k, v, 0, kMaxCount);
+  else if (k == "landmark-namespace") {
+    // A comma-separated list of robot ids (key_t.robot is an int32 ≥ 0).
+    c.landmarkNamespaces.clear();
+    size_t from = 0;
+    while (true) {
+      const size_t comma = v.find(',', from);
+      const std::string id = v.substr(from, comma == std::string::npos ? comma : comma - from);
+      c.landmarkNamespaces.insert(
+          static_cast<std::uint32_t>(toInt(k, id, 0, std::numeric_limits<std::int32_t>::max())));
+      if (comma == std::string::npos) break;
+      from = comma + 1;
+    }
+  }
 }
 
 void loadFile(ServerConfig& c, const std::string& path) {
@@ -192,6 +206,9 @@ std::string serverUsage() {
          "  --poses-per-update N  batches queued while solving are applied together, at most\n"
          "                        N new poses of one robot per update, 0-1000000 (default\n"
          "                        100; 0 = no bound)\n"
+         "  --landmark-namespace N[,M...]  robot ids that hold landmarks only (a shared tag map):\n"
+         "                        poses there are refused; a namespace's landmarks live in the\n"
+         "                        frame of the first robot to sight one (default none)\n"
          "  --log-level L         trace|debug|info|warn|error|critical|off (default info)\n"
          "  --config FILE         `key = value` lines with the names above; flags override\n"
          "  --help                this text\n";

@@ -1,6 +1,8 @@
 #pragma once
 // The loopd command line and config file. The file holds `key = value` lines with the flags'
 // names (without the dashes; `#` starts a comment); flags given on the command line override it.
+#include <cstdint>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -17,8 +19,9 @@ struct ServerConfig {
   double holdSeconds = 30.0;
   int holdMax = 1000;
   double idleSeconds = 0.5;
-  int maxHypotheses = 10;    // mh: live hypotheses at most (K)
-  int posesPerUpdate = 100;  // EngineOptions::posesPerUpdate
+  int maxHypotheses = 10;                      // mh: live hypotheses at most (K)
+  int posesPerUpdate = 100;                    // EngineOptions::posesPerUpdate
+  std::set<std::uint32_t> landmarkNamespaces;  // EngineOptions::landmarkNamespaces
   bool help = false;
 };
 

@@ -85,14 +85,21 @@ bool isInterRobot(const W& f) {
          f.keys[0].robot != f.keys[1].robot;
 }
 
+bool isSighting(const W& f) {
+  return f.type == W::POSE_POINT2 || f.type == W::POSE_POINT3 || f.type == W::BEARING_RANGE2;
+}
+
 bool isCrossRobotSighting(const W& f) {
-  return (f.type == W::POSE_POINT2 || f.type == W::POSE_POINT3 || f.type == W::BEARING_RANGE2) &&
-         f.keys[0].robot != f.keys[1].robot;
+  return isSighting(f) && f.keys[0].robot != f.keys[1].robot;
 }
 
 std::shared_ptr<Factor> anchoredFactor(const Factor& built) {
+  return anchoredFactor(built, keyRobot(built.key(1)));
+}
+
+std::shared_ptr<Factor> anchoredFactor(const Factor& built, std::uint32_t otherFrame) {
   const Key xr = built.key(0), other = built.key(1);
-  const Key ar = anchorKey(keyRobot(xr)), as = anchorKey(keyRobot(other));
+  const Key ar = anchorKey(keyRobot(xr)), as = anchorKey(otherFrame);
   std::shared_ptr<Factor> out;
   if (const auto* b = dynamic_cast<const BetweenFactorSE2*>(&built))
     out = std::make_shared<AnchoredBetweenFactorSE2>(ar, xr, as, other, b->measured(),
@@ -125,10 +132,10 @@ Key ownerTiedLandmark(const Factor& f) {
   return 0;
 }
 
-InterEdge interEdgeOf(Key pose, Key other, VarType otherType) {
+InterEdge interEdgeOf(Key pose, Key other, VarType otherType, std::uint32_t otherFrame) {
   InterEdge e;
   e.r = keyRobot(pose);
-  e.s = keyRobot(other);
+  e.s = otherFrame;
   if (otherType == VarType::Point2 || otherType == VarType::Point3) {
     e.landmark = other;
     e.needed = otherType == VarType::Point2 ? 2 : 3;
@@ -136,6 +143,8 @@ InterEdge interEdgeOf(Key pose, Key other, VarType otherType) {
   return e;
 }
 
-InterEdge interEdgeOf(const Factor& f) { return interEdgeOf(f.key(1), f.key(3), f.varType(3)); }
+InterEdge interEdgeOf(const Factor& f) {
+  return interEdgeOf(f.key(1), f.key(3), f.varType(3), keyRobot(f.key(2)));  // A_s names s
+}
 
 }  // namespace loopd::server

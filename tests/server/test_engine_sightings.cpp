@@ -10,6 +10,8 @@
 #include <vector>
 
 #include "loopd/ambiguous_factor_t.hpp"
+#include "loopd/error_t.hpp"
+#include "loopd/estimate_t.hpp"
 #include "tests/server/engine_harness.h"
 
 namespace loopd {
@@ -44,9 +46,13 @@ struct TwoRobots {
   FactorPublisher r0, r1;
   World2 w;
   bool bearingRange = false;
+  int landmarkRobot = 0;  // the robot id the landmarks' keys name
   explicit TwoRobots(double theta1, bool bearing = false, const char* solver = "isam2",
                      server::Journal* journal = nullptr)
-      : h(solver, 30, journal),
+      : TwoRobots(theta1, bearing, EngineHarness::options(solver), journal) {}
+  TwoRobots(double theta1, bool bearing, const server::EngineOptions& o,
+            server::Journal* journal = nullptr)
+      : h(o, journal),
         r0([this](const std::string&, const std::vector<std::uint8_t>& b) { h.sendRaw(b); }, "r0",
            "T_FACTORS"),
         r1([this](const std::string&, const std::vector<std::uint8_t>& b) { h.sendRaw(b); }, "r1",
@@ -54,14 +60,16 @@ struct TwoRobots {
         bearingRange(bearing) {
     w.T1 = SE2(3, 4, theta1);
   }
-  // A sighting of robot 0's landmark l from robot `robot`'s pose i; returns its id.
+  // A sighting of landmark l (robot 0's, or landmarkRobot's) from robot `robot`'s pose i; returns
+  // its id.
   std::int64_t sight(FactorPublisher& p, int robot, int i, int l) {
     const SE2 x = robot == 0 ? w.robot0(i) : w.robot1(i);
     const Vec2 z = x.transformTo(w.landmarks[static_cast<size_t>(l)]);
     if (bearingRange)
-      return p.bearingRange(KeyRef::pose(robot, i), KeyRef::point(0, l), std::atan2(z.y(), z.x()),
-                            z.norm(), kInfo2);
-    return p.landmark(KeyRef::pose(robot, i), KeyRef::point(0, l), Eigen::Vector2d(z), kInfo2);
+      return p.bearingRange(KeyRef::pose(robot, i), KeyRef::point(landmarkRobot, l),
+                            std::atan2(z.y(), z.x()), z.norm(), kInfo2);
+    return p.landmark(KeyRef::pose(robot, i), KeyRef::point(landmarkRobot, l), Eigen::Vector2d(z),
+                      kInfo2);
   }
   // Robot 0 walks poses 0..5 and sights every landmark from its first and last pose; robot 1
   // walks its poses 0..5.
@@ -96,7 +104,9 @@ struct TwoRobots {
     }
     for (int l = 0; l < 4; ++l) {
       std::vector<double> p;
-      ASSERT_TRUE(h.engine.commonFramePose(landmarkKey(static_cast<std::uint64_t>(l), 0), p));
+      ASSERT_TRUE(h.engine.commonFramePose(
+          landmarkKey(static_cast<std::uint64_t>(l), static_cast<std::uint32_t>(landmarkRobot)),
+          p));
       EXPECT_NEAR(p[0], w.landmarks[static_cast<size_t>(l)].x(), tol) << l;
       EXPECT_NEAR(p[1], w.landmarks[static_cast<size_t>(l)].y(), tol) << l;
     }
@@ -507,6 +517,153 @@ TEST(EngineSightings, RemovingTheOwnersOnlySightingOfALandmarkRerootsTheRobot) {
   t.r1.flush();
   EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
   EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
+}
+
+server::EngineOptions withNamespace100() {
+  server::EngineOptions o = EngineHarness::options("isam2");
+  o.landmarkNamespaces = {100};
+  return o;
+}
+
+// The published estimate of robot `robot`'s landmark `l` (the latest message that has it).
+const loopd::estimate_t* latestEstimateWith(const EngineHarness& h, int robot, int l) {
+  for (auto e = h.out.estimates.rbegin(); e != h.out.estimates.rend(); ++e)
+    if (e->robot == robot)
+      for (std::int64_t i : e->landmark_indices)
+        if (i == l) return &*e;
+  return nullptr;
+}
+
+// A landmark namespace (a shared tag map, robot id 100, which never has poses): the first
+// robot to sight one of its landmarks holds them all in its frame, and other robots' sightings
+// join their frames to it as sightings of that robot's landmarks do. Before, nothing joined
+// robot 100's frame (it has no poses), and every sighting of its landmarks was kept back for
+// good; the workaround was to give the tags to one robot.
+void namespaceAdoptedBy(int firstSighter) {
+  TwoRobots t(1.3, false, withNamespace100());
+  t.landmarkRobot = 100;
+  if (firstSighter == 0) {
+    t.walk();  // robot 0 sights every tag from poses 0 and 5
+    t.sight(t.r1, 1, 2, 0);
+    t.sight(t.r1, 1, 3, 1);
+    t.r1.flush();
+  } else {
+    for (int i = 0; i < 5; ++i) {
+      t.r0.odometry(0, i, i + 1, pose2(t.w.robot0(i).between(t.w.robot0(i + 1))), kInfoPose2);
+      t.r0.flush();
+    }
+    for (int j = 0; j < 5; ++j) {
+      t.r1.odometry(1, j, j + 1, pose2(t.w.odometry1()), kInfoPose2);
+      for (int l = 0; l < 4; ++l) t.sight(t.r1, 1, j + 1, l);
+      t.r1.flush();
+    }
+    EXPECT_EQ(t.anchoredFactors(), 0);  // robot 1's own tags now
+    t.sight(t.r0, 0, 2, 0);
+    t.r0.flush();
+    EXPECT_FALSE(t.h.engine.robotJoined(0));  // one tag: kept back
+    t.sight(t.r0, 0, 4, 1);
+    t.r0.flush();
+  }
+  EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+  ASSERT_TRUE(t.h.engine.robotJoined(0));
+  ASSERT_TRUE(t.h.engine.robotJoined(1));
+  EXPECT_EQ(t.anchoredFactors(), 2);
+  EXPECT_LT(t.h.engine.backend().chi2(), 1e-9);
+  t.expectWorld(1e-6);  // tags in the common frame (robot 0's, the world's)
+  // Published as robot 100's landmarks, in the common frame.
+  const loopd::estimate_t* e = latestEstimateWith(t.h, 100, 3);
+  ASSERT_NE(e, nullptr);
+  EXPECT_TRUE(e->common_frame);
+  EXPECT_EQ(e->frame_robot, 0);
+  EXPECT_EQ(e->num_poses, 0);
+  for (size_t i = 0; i < e->landmark_indices.size(); ++i) {
+    const Vec2& truth = t.w.landmarks[static_cast<size_t>(e->landmark_indices[i])];
+    EXPECT_NEAR(e->landmarks[i][0], truth.x(), 1e-6);
+    EXPECT_NEAR(e->landmarks[i][1], truth.y(), 1e-6);
+  }
+}
+
+TEST(EngineSightings, ALandmarkNamespaceLivesInItsFirstSightersFrame) { namespaceAdoptedBy(0); }
+
+TEST(EngineSightings, ALandmarkNamespaceAdoptedByTheOtherRobotJoinsTheSame) {
+  namespaceAdoptedBy(1);
+}
+
+// A landmark namespace has no poses, and its landmarks no frame of their own for a prior.
+TEST(EngineSightings, ALandmarkNamespaceRefusesPosesAndPriors) {
+  TwoRobots t(1.3, false, withNamespace100());
+  t.landmarkRobot = 100;
+  t.walk();
+  const int size = t.h.engine.backend().graph().size();
+  t.r1.odometry(100, 0, 1, pose2(t.w.odometry1()), kInfoPose2);
+  t.r1.flush();
+  ASSERT_EQ(t.h.out.errors.size(), 2u);  // one per pose key
+  for (const auto& e : t.h.out.errors) {
+    EXPECT_EQ(e.code, loopd::error_t::WRONG_KEY_KIND);
+    EXPECT_NE(e.reason.find("landmark namespace"), std::string::npos) << e.reason;
+  }
+  loopd::factor_t prior = client::landmarkFactor(KeyRef::pose(1, 0), KeyRef::point(100, 9),
+                                                 Eigen::Vector2d(1, 2), kInfo2);
+  prior.type = loopd::factor_t::PRIOR_POINT2;
+  prior.role = loopd::factor_t::ROLE_PRIOR;
+  prior.keys.erase(prior.keys.begin());
+  prior.num_keys = 1;
+  prior.id = -1;  // the publisher's next
+  t.r1.odometry(1, 5, 6, pose2(t.w.odometry1()), kInfoPose2);
+  t.r1.factor(prior);
+  t.r1.flush();
+  ASSERT_EQ(t.h.out.errors.size(), 3u);
+  EXPECT_EQ(t.h.out.errors.back().code, loopd::error_t::INVALID_FIELD);
+  EXPECT_NE(t.h.out.errors.back().reason.find("placed by sightings only"), std::string::npos)
+      << t.h.out.errors.back().reason;
+  EXPECT_EQ(t.h.engine.backend().graph().size(), size);  // neither batch applied
+}
+
+// The adopting robot's ambiguous sighting of a namespace's landmarks is one in its own frame
+// (before the validator knew namespaces it read as a link between robots 0 and 100, whose
+// frames nothing joined, and refused it); a resumed server with the same namespace replays the
+// adoption and ends where the live one did.
+TEST(EngineSightings, ALandmarkNamespaceTakesAmbiguousSightingsAndResumes) {
+  const std::string path =
+      ::testing::TempDir() + "/" + std::to_string(getpid()) + "_namespace.lcmlog";
+  std::remove(path.c_str());
+  {
+    server::EngineOptions o = withNamespace100();
+    o.idleSeconds = 0;  // idle() optimizes at once
+    server::Journal j(path, false);
+    TwoRobots t(1.3, false, o, &j);
+    t.landmarkRobot = 100;
+    t.walk();
+    const Vec2 z = t.w.robot0(3).transformTo(t.w.landmarks[1]);
+    std::vector<loopd::factor_t> alternatives;
+    for (int l : {1, 2})
+      alternatives.push_back(client::landmarkFactor(KeyRef::pose(0, 3), KeyRef::point(100, l),
+                                                    Eigen::Vector2d(z), kInfo2));
+    t.r0.ambiguous(loopd::ambiguous_factor_t::MULTI_ASSOCIATION, alternatives, false);
+    t.r0.flush();
+    EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+    t.sight(t.r1, 1, 2, 0);
+    t.sight(t.r1, 1, 3, 1);
+    t.r1.flush();
+    EXPECT_TRUE(t.h.out.errors.empty()) << t.firstError();
+    ASSERT_TRUE(t.h.engine.robotJoined(1));
+    EXPECT_EQ(t.anchoredFactors(), 2);
+
+    EngineHarness resumed(o, nullptr);
+    resumed.engine.replay(path, false, nullptr);
+    EXPECT_TRUE(resumed.out.errors.empty());
+    // The wrong alternative leaves a residual: compare the converged estimates.
+    t.h.engine.idle();
+    resumed.engine.idle();
+    EXPECT_EQ(resumed.engine.backend().graph().size(), t.h.engine.backend().graph().size());
+    for (const Key k : {landmarkKey(3, 100), poseKey(5, 1)}) {
+      std::vector<double> live, again;
+      ASSERT_TRUE(t.h.engine.commonFramePose(k, live));
+      ASSERT_TRUE(resumed.engine.commonFramePose(k, again));
+      for (size_t i = 0; i < live.size(); ++i) EXPECT_NEAR(again[i], live[i], 1e-6) << i;
+    }
+  }
+  std::remove(path.c_str());
 }
 
 // 3D: two landmarks leave the rotation about the line through them free; the third fixes it.

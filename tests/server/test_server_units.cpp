@@ -9,6 +9,7 @@
 #include <fstream>
 #include <limits>
 #include <random>
+#include <set>
 #include <thread>
 
 #include "client/factor_publisher.h"
@@ -877,6 +878,14 @@ TEST(ServerConfig, FlagsFileAndDefaults) {
   EXPECT_EQ(parseServerConfig({"--poses-per-update", "25"}).posesPerUpdate, 25);
   EXPECT_THROW(parseServerConfig({"--poses-per-update", "-1"}), std::invalid_argument);
   EXPECT_THROW(parseServerConfig({"--poses-per-update", "2.5"}), std::invalid_argument);
+  // Landmark namespaces: a comma-separated list of robot ids.
+  EXPECT_TRUE(parseServerConfig({}).landmarkNamespaces.empty());
+  EXPECT_EQ(parseServerConfig({"--landmark-namespace", "100"}).landmarkNamespaces,
+            (std::set<std::uint32_t>{100}));
+  EXPECT_EQ(parseServerConfig({"--landmark-namespace=7,100,2147483647"}).landmarkNamespaces,
+            (std::set<std::uint32_t>{7, 100, 2147483647u}));
+  for (const char* bad : {"", "-1", "1,", ",1", "1,,2", "x", "2147483648", "1.5"})
+    EXPECT_THROW(parseServerConfig({"--landmark-namespace", bad}), std::invalid_argument) << bad;
   EXPECT_EQ(effectiveLcmUrl("udpm://239.255.76.67:7667?ttl=0"),
             "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304");
   EXPECT_EQ(effectiveLcmUrl("memq://"), "memq://");

@@ -295,13 +295,15 @@ TEST(LoopdFeed, HypothesesGroupsBecomeAmbiguousFactors) {
   EXPECT_EQ(factors, 2512 - 15);  // the true closures travel inside their groups
 }
 
-// `dataset` fed by loopd-feed with `feedArgs` to a fresh server until `batches` are handled:
-// what loopd-listen said at the end, and the server's log.
+// `dataset` fed by loopd-feed with `feedArgs` to a fresh server (with `serverArgs`) until
+// `batches` are handled: what loopd-listen said at the end, and the server's log.
 void feedThroughServer(const std::string& name, const std::string& dataset, int batches,
                        const std::vector<std::string>& feedArgs, std::string& said,
-                       std::string& log) {
+                       std::string& log, const std::vector<std::string>& serverArgs = {}) {
   const std::string url = uniqueUrl();
-  Proc srv = Proc::start({kLoopd, "--lcm-url", url}, tmp(name + "_srv.log"));
+  std::vector<std::string> server = {kLoopd, "--lcm-url", url};
+  server.insert(server.end(), serverArgs.begin(), serverArgs.end());
+  Proc srv = Proc::start(server, tmp(name + "_srv.log"));
   ASSERT_TRUE(srv.waitForOutput("loopd: solver", 20)) << srv.output();
   Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", tmp(name + ".g2o"),
                              "--until-batches", std::to_string(batches)},
@@ -359,6 +361,29 @@ TEST(LoopdFeed, VictoriaParkWithOneLandmarkOwnerEndsAtTheOptimum) {
   feedVictoriaParkInTwoRobots("vp2_owner", {"--landmark-owner", "0"}, said, log);
   EXPECT_NE(said.find("151 landmarks"), std::string::npos) << said;
   EXPECT_NE(said.find("6969 batches accepted, 0 duplicate, 0 rejected"), std::string::npos) << said;
+}
+
+// Every landmark in a landmark namespace, robot id 2, which has no poses (a shared tag map):
+// with loopd --landmark-namespace 2 the first robot to sight a tag holds them all in its frame
+// and the other's sightings join the frames. Without the flag every sighting is kept back (0
+// landmarks) and the server's log says which flag would take them.
+TEST(LoopdFeed, VictoriaParkWithALandmarkNamespaceEndsAtTheOptimum) {
+  const std::vector<std::string> feed = {"--robots", "2", "--interleave", "--landmark-namespace",
+                                         "2"};
+  std::string said, log;
+  feedThroughServer("vp2_ns", kData + "/victoria_park.txt", 6969, feed, said, log,
+                    {"--landmark-namespace", "2"});
+  EXPECT_NE(said.find("6969 poses, 151 landmarks"), std::string::npos) << said;
+  EXPECT_NE(said.find("3 robots, 3 in a common frame"), std::string::npos) << said;  // 2: tags
+  EXPECT_NEAR(chi2Said(said), 6184.12, 0.01) << said;
+  EXPECT_NE(log.find("landmark namespace 2: its landmarks live in robot "), std::string::npos)
+      << log;
+  feedThroughServer("vp2_no_ns", kData + "/victoria_park.txt", 6969, feed, said, log);
+  EXPECT_NE(said.find("6969 poses, 0 landmarks"), std::string::npos) << said;
+  EXPECT_NE(log.find("robot 2 has sent no poses: if it names a shared landmark map, run loopd "
+                     "with --landmark-namespace 2"),
+            std::string::npos)
+      << log;
 }
 
 // 3D cross-robot sightings through the daemon (../shared/datasets has no 3D landmark file):

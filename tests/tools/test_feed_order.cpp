@@ -173,6 +173,10 @@ TEST(FeedOrder, AFixedOwnerTakesEveryLandmark) {
   EXPECT_TRUE(FeedOrder(ds, -1, 2, false, 1).landmarksOnlyOthersSight(ds).empty());
   EXPECT_THROW(FeedOrder(ds, -1, 2, false, 2), std::invalid_argument);
   EXPECT_THROW(FeedOrder(ds, 1, 2, false, 1), std::invalid_argument);  // one pose: one robot
+  // A landmark namespace (loopd-feed --landmark-namespace N): a robot id without poses.
+  const FeedOrder tags(ds, -1, 2, false, 100, true);
+  EXPECT_EQ(name(tags.factor(ds.edges[6]).keys[1]), "100 landmark 7");
+  EXPECT_THROW(FeedOrder(ds, -1, 2, false, 1, true), std::invalid_argument);
 }
 
 // Eight poses in two robots round-robin, 0 4 1 5 2 6 3 7; landmark 9 sighted from 4, 1 and 3.

@@ -345,7 +345,9 @@ TEST(FeedArguments, MalformedNumbersAreUsageErrors) {
       {"--rate inf", "--rate"},
       {"--rate 1e-300", "--rate"},
       {"--landmark-owner -1", "--landmark-owner"},
-      {"--landmark-owner x", "--landmark-owner"}};
+      {"--landmark-owner x", "--landmark-owner"},
+      {"--landmark-namespace -1", "--landmark-namespace"},
+      {"--landmark-namespace 1000000001", "--landmark-namespace"}};
   for (const auto& [args, flag] : cases) {
     const Outcome r = run(feed + args);
     EXPECT_EQ(r.status, 2) << args << "\n" << r.err;
@@ -359,6 +361,13 @@ TEST(FeedArguments, MalformedNumbersAreUsageErrors) {
   EXPECT_EQ(owner.err.rfind("loopd-feed: --landmark-owner 2 needs --robots above it", 0), 0u)
       << owner.err;
   EXPECT_EQ(run(feed + "--robots 2 --landmark-owner 1").status, 0);
+  // A namespace is not one of them; and one of the two flags, once.
+  const Outcome ns = run(feed + "--robots 2 --landmark-namespace 1");
+  EXPECT_EQ(ns.status, 2) << ns.err;
+  EXPECT_EQ(ns.err.rfind("loopd-feed: --landmark-namespace 1 is a robot fed", 0), 0u) << ns.err;
+  const Outcome both = run(feed + "--robots 2 --landmark-owner 1 --landmark-namespace 5");
+  EXPECT_EQ(both.status, 2) << both.err;
+  EXPECT_EQ(run(feed + "--robots 2 --landmark-namespace 100").status, 0);
   const Outcome slow = run(feed + "--poses 3 --rate 1e6");  // a log does not wait
   EXPECT_EQ(slow.status, 0) << slow.err;
 }

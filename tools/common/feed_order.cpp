@@ -11,7 +11,7 @@
 namespace loopd::tools {
 
 FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool interleave,
-                     int fixedOwner) {
+                     int fixedOwner, bool ownerIsNamespace) {
   std::vector<std::int64_t> ids;
   for (const auto& v : ds.poses) ids.push_back(v.id);
   std::sort(ids.begin(), ids.end());
@@ -33,9 +33,12 @@ FeedOrder::FeedOrder(const io::Dataset& ds, long poses, int robotsWanted, bool i
     for (size_t k = 0; order_.size() < n; ++k)
       for (size_t r = 0; r < robots; ++r)
         if (k < segment[r].size()) order_.push_back(segment[r][k]);
-  if (fixedOwner >= robots_)
+  if (!ownerIsNamespace && fixedOwner >= robots_)
     throw std::invalid_argument("landmark owner " + std::to_string(fixedOwner) +
                                 " is not one of the " + std::to_string(robots_) + " robots");
+  if (ownerIsNamespace && fixedOwner < robots_)
+    throw std::invalid_argument("landmark namespace " + std::to_string(fixedOwner) +
+                                " is one of the " + std::to_string(robots_) + " robots");
   std::vector<bool> started(robots, false);
   startsRobot_.resize(n);
   for (size_t i = 0; i < n; ++i) {

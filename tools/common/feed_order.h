@@ -18,9 +18,11 @@ class FeedOrder {
  public:
   /// Throws std::runtime_error when the file has no poses. `poses` < 0 feeds them all;
   /// `robots` is capped at the number of poses fed. `landmarkOwner` ≥ 0 gives every landmark
-  /// to that robot (std::invalid_argument unless it is below robots()); < 0, each to its
-  /// first sighter.
-  FeedOrder(const io::Dataset& ds, long poses, int robots, bool interleave, int landmarkOwner = -1);
+  /// to that robot (std::invalid_argument unless it is below robots()), or with
+  /// `ownerIsNamespace` to that landmark namespace, a robot id without poses
+  /// (std::invalid_argument unless it is at least robots()); < 0, each to its first sighter.
+  FeedOrder(const io::Dataset& ds, long poses, int robots, bool interleave, int landmarkOwner = -1,
+            bool ownerIsNamespace = false);
 
   const std::vector<std::int64_t>& poses() const { return order_; }  // ids, in feed order
   int robots() const { return robots_; }

@@ -2,7 +2,8 @@
 // LCM log for lcm-logplayer.
 //
 //   loopd-feed DATASET [--robots N] [--rate HZ] [--lcm-url URL] [--sender NAME] [--log OUT.lcmlog]
-//              [--channel-prefix P] [--interleave] [--poses N] [--landmark-owner R] [--quiet]
+//              [--channel-prefix P] [--interleave] [--poses N] [--landmark-owner R]
+//              [--landmark-namespace N] [--quiet]
 //
 // The poses (by file id) are cut into N consecutive segments, robot k owning segment k; a pose
 // keeps its file id as its index. Poses appear in id order (or, with --interleave, round-robin
@@ -16,7 +17,9 @@
 // another robot's are cross-robot sightings, published after the owner's first, and tie the
 // robots' frames together. --landmark-owner R gives every landmark to robot R instead (a
 // shared landmark map): the server then places a landmark R has not sighted from another
-// robot's sighting once their frames are joined.
+// robot's sighting once their frames are joined. --landmark-namespace N gives every landmark to
+// robot id N ≥ the robots fed, which has no poses (a server run with --landmark-namespace N holds
+// them in the frame of the first robot to sight one).
 // TORO EQUIV pairs go as trusted identity constraints (FeedOrder::equivalenceFactor), ids
 // following the edges' as in loopd-solve (TORO has no HYPOTHESES: no group id is taken).
 // The k-th batch of a sender has sequence k, so feeding the same file again is a resend.
@@ -49,7 +52,8 @@ namespace {
 struct Options {
   std::string dataset, lcmUrl, sender = "feed", log, prefix = "LOOPD_";
   int robots = 1;
-  int landmarkOwner = -1;  // < 0: each landmark is its first sighter's
+  int landmarkOwner = -1;          // < 0: each landmark is its first sighter's
+  bool landmarkNamespace = false;  // landmarkOwner names a namespace, not a robot
   double rate = 0.0;
   bool interleave = false, quiet = false;
   long poses = -1;
@@ -58,7 +62,7 @@ struct Options {
 const char* kUsage =
     "usage: loopd-feed DATASET [--robots N] [--rate HZ] [--lcm-url URL] [--sender NAME]\n"
     "                  [--log OUT.lcmlog] [--channel-prefix P] [--interleave] [--poses N]\n"
-    "                  [--landmark-owner R] [--quiet]\n"
+    "                  [--landmark-owner R | --landmark-namespace N] [--quiet]\n"
     "  --robots N        split the poses into N (1-1000) consecutive segments, one robot each\n"
     "                    (default 1)\n"
     "  --rate HZ         poses per second, >= 0 (default 0 = as fast as possible)\n"
@@ -67,7 +71,9 @@ const char* kUsage =
     "  --interleave      robots publish round-robin instead of one segment after the other\n"
     "  --poses N         only the first N poses (N >= 1; and the edges among them)\n"
     "  --landmark-owner R every landmark is robot R's (0 <= R < N: a shared landmark map);\n"
-    "                    default: each is the robot's that sights it first\n";
+    "                    default: each is the robot's that sights it first\n"
+    "  --landmark-namespace N every landmark is robot id N's (N >= robots, up to 1000000000),\n"
+    "                    which has no poses: serve with loopd --landmark-namespace N\n";
 
 Options parse(int argc, char** argv) {
   Options o;
@@ -97,9 +103,13 @@ Options parse(int argc, char** argv) {
       o.poses = static_cast<long>(tools::parseIntFlag(a, val(), 1, 1000000000));
     else if (a == "--interleave")
       o.interleave = true;
-    else if (a == "--landmark-owner")
-      o.landmarkOwner = static_cast<int>(tools::parseIntFlag(a, val(), 0, 999));
-    else if (a == "--quiet")
+    else if (a == "--landmark-owner" || a == "--landmark-namespace") {
+      if (o.landmarkOwner >= 0)
+        throw std::invalid_argument("--landmark-owner and --landmark-namespace: one, once");
+      o.landmarkNamespace = a == "--landmark-namespace";
+      o.landmarkOwner = static_cast<int>(
+          tools::parseIntFlag(a, val(), 0, o.landmarkNamespace ? 1000000000 : 999));
+    } else if (a == "--quiet")
       o.quiet = true;
     else if (a.rfind("--", 0) == 0)
       throw std::invalid_argument("unknown flag " + a);
@@ -109,9 +119,13 @@ Options parse(int argc, char** argv) {
       throw std::invalid_argument("unexpected argument " + a);
   }
   if (o.dataset.empty()) throw std::invalid_argument("no DATASET");
-  if (o.landmarkOwner >= o.robots)
+  if (!o.landmarkNamespace && o.landmarkOwner >= o.robots)
     throw std::invalid_argument("--landmark-owner " + std::to_string(o.landmarkOwner) +
                                 " needs --robots above it (got " + std::to_string(o.robots) + ")");
+  if (o.landmarkNamespace && o.landmarkOwner < o.robots)
+    throw std::invalid_argument("--landmark-namespace " + std::to_string(o.landmarkOwner) +
+                                " is a robot fed (--robots " + std::to_string(o.robots) +
+                                "): a namespace has no poses");
   return o;
 }
 
@@ -133,7 +147,8 @@ std::int8_t ambiguousMode(const std::vector<loopd::factor_t>& alternatives, int 
 
 int run(const Options& o) {
   io::Dataset ds = io::readDataset(o.dataset);
-  const tools::FeedOrder feed(ds, o.poses, o.robots, o.interleave, o.landmarkOwner);
+  const tools::FeedOrder feed(ds, o.poses, o.robots, o.interleave, o.landmarkOwner,
+                              o.landmarkNamespace);
   const std::vector<std::int64_t> shared = feed.sharedLandmarks(ds);
   if (!shared.empty() && !o.quiet)
     std::fprintf(stderr,
@@ -142,7 +157,13 @@ int run(const Options& o) {
                  "together\n",
                  shared.size(), static_cast<long long>(shared.front()),
                  o.landmarkOwner >= 0 ? "the owner's" : "the first robot's");
-  const std::vector<std::int64_t> othersOnly = feed.landmarksOnlyOthersSight(ds);
+  if (o.landmarkNamespace && !o.quiet)
+    std::fprintf(stderr,
+                 "loopd-feed: every landmark is landmark namespace %d's: serve with loopd "
+                 "--landmark-namespace %d\n",
+                 o.landmarkOwner, o.landmarkOwner);
+  const std::vector<std::int64_t> othersOnly =
+      o.landmarkNamespace ? std::vector<std::int64_t>{} : feed.landmarksOnlyOthersSight(ds);
   if (!othersOnly.empty() && !o.quiet)
     std::fprintf(stderr,
                  "loopd-feed: %zu landmarks of robot %d (first: %lld) are sighted only by other "
