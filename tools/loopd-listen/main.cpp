@@ -191,15 +191,27 @@ int main(int argc, char** argv) {
   }
   if (!quiet) {
     const auto st = sub.lastStatus();
-    int common = 0;
-    for (const auto& [r, t] : sub.all()) common += t.commonFrame ? 1 : 0;
+    // A table without poses is a landmark namespace's (loopd --landmark-namespace), not a robot's.
+    int robots = 0, common = 0, namespaces = 0;
+    for (const auto& [r, t] : sub.all()) {
+      if (t.poses.empty()) {
+        ++namespaces;
+        continue;
+      }
+      ++robots;
+      common += t.commonFrame ? 1 : 0;
+    }
+    const std::string alsoNamespaces = namespaces == 0 ? ""
+                                                       : ", " + std::to_string(namespaces) +
+                                                             " landmark namespace" +
+                                                             (namespaces > 1 ? "s" : "");
     std::fprintf(
         stderr,
-        "loopd-listen: %zu poses, %zu landmarks written to %s (%lld estimate messages, %zu robots, "
-        "%d in a common frame; server %s%s, chi2 %.12g, %lld batches accepted, %lld duplicate, "
+        "loopd-listen: %zu poses, %zu landmarks written to %s (%lld estimate messages, %d robots, "
+        "%d in a common frame%s; server %s%s, chi2 %.12g, %lld batches accepted, %lld duplicate, "
         "%lld rejected, %lld expired, %lld held)\n",
         ds.poses.size(), ds.landmarks.size(), out.c_str(),
-        static_cast<long long>(sub.estimatesReceived()), sub.all().size(), common,
+        static_cast<long long>(sub.estimatesReceived()), robots, common, alsoNamespaces.c_str(),
         st.solver.c_str(), st.converged ? " converged" : "", st.chi2,
         static_cast<long long>(st.batches_accepted), static_cast<long long>(st.batches_duplicate),
         static_cast<long long>(st.batches_rejected), static_cast<long long>(st.batches_expired),
