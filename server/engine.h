@@ -25,7 +25,10 @@
 // sighting of a landmark nobody has placed yet is kept back the same way (it does not hold its
 // batch) and, once the frames are joined, places it in s's frame through the anchors. Such a
 // landmark relates no frames until s ties it (ownerTies_): then the groups it joins merge, and
-// removing the tie, like removing an inter-robot factor, regroups the robots.
+// removing the tie, like removing an inter-robot factor, regroups the robots. A landmark
+// namespace (EngineOptions::landmarkNamespaces: a robot id with landmarks only) has no frame
+// of its own: the first robot to sight one of its landmarks adopts it (adopted_), and from
+// then on its landmarks are that robot's for every rule above (landmarkFrame).
 //
 // An ambiguous alternative never creates an anchor (under "none" or another alternative it
 // would be unconstrained, and each alternative implies another anchor value): an inter-robot
