@@ -165,7 +165,9 @@ std::map<std::uint32_t, std::uint32_t> Engine::adoptionsOf(const loopd::factor_b
 
 bool Engine::isCrossFrameSighting(const loopd::factor_t& f,
                                   const std::map<std::uint32_t, std::uint32_t>& adoptions) const {
-  if (!isSighting(f)) return false;
+  // A namespace has no poses, so only a cross-robot sighting can be one (of its adopter's
+  // frame or not).
+  if (!isCrossRobotSighting(f)) return false;
   const auto robot = static_cast<std::uint32_t>(f.keys[1].robot);
   const auto a = adoptions.find(robot);
   return static_cast<std::uint32_t>(f.keys[0].robot) !=

@@ -191,6 +191,11 @@ class Engine : private GraphView {
     return opt_.landmarkNamespaces.count(robot) > 0;
   }
   std::uint32_t landmarkFrame(std::uint32_t robot) const override;
+  /// The robot whose frame key k lives in: its own robot's, or for a landmark of an adopted
+  /// landmark namespace, the adopting robot's.
+  std::uint32_t frameOf(Key k) const {
+    return keyKind(k) == KeyKind::Landmark ? landmarkFrame(keyRobot(k)) : keyRobot(k);
+  }
   std::string solver() const override { return backend_->name(); }
   std::unique_ptr<PerFactorRobustBackend> makeSolver(const std::string& name) const;
 

@@ -127,8 +127,7 @@ bool Engine::commonFramePose(Key k, std::vector<double>& out) const {
   const Values& est = backend_->estimate();
   const int s = est.slot(k);
   if (s < 0) return false;
-  const std::uint32_t r =
-      keyKind(k) == KeyKind::Landmark ? landmarkFrame(keyRobot(k)) : keyRobot(k);
+  const std::uint32_t r = frameOf(k);
   const bool anchored = robotJoined(r) && est.contains(anchorKey(r));
   if (est.type(s) == VarType::SE2) {
     const SE2 x = anchored ? se2Of(est, anchorKey(r)) * est.se2(s) : est.se2(s);

@@ -314,7 +314,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
       if (isInterRobot(wf))
         f = anchoredFactor(*f);
       else if (isCrossFrameSighting(wf, {}))
-        f = anchoredFactor(*f, landmarkFrame(static_cast<std::uint32_t>(wf.keys[1].robot)));
+        f = anchoredFactor(*f, frameOf(f->key(1)));
       f->setId(newFactorId());
       f->setRobustRequest({wf.robust, wf.robust_param});  // applies once flattened
       g.factor.alternatives.push_back(std::move(f));
@@ -412,7 +412,7 @@ void Engine::commit(Staged& s) {
       if (const Key l = ownerTiedLandmark(*f->second); l != 0 && --ownerTies_[l] <= 0) {
         ownerTies_.erase(l);
         // Other robots' sightings of it may have been all that joined their frames to its owner's.
-        const auto owner = robots_.find(landmarkFrame(keyRobot(l)));
+        const auto owner = robots_.find(frameOf(l));
         if (owner != robots_.end() && owner->second.anchored) regroupNeeded_ = true;
       }
     live_.erase(r);

@@ -136,8 +136,7 @@ Eigen::MatrixXd Engine::commonFrameCovariance(const std::vector<Key>& keys) {
   std::vector<Key> vars = keys;
   std::vector<int> anchorCol(keys.size(), -1);
   for (size_t i = 0; i < keys.size(); ++i) {
-    const std::uint32_t r = keyKind(keys[i]) == KeyKind::Landmark ? landmarkFrame(keyRobot(keys[i]))
-                                                                  : keyRobot(keys[i]);
+    const std::uint32_t r = frameOf(keys[i]);
     if (!robotJoined(r) || !est.contains(anchorKey(r))) continue;
     auto it = std::find(vars.begin(), vars.end(), anchorKey(r));
     if (it == vars.end()) {

@@ -37,7 +37,7 @@ Vec2 sightedPoint2(const Factor& f) {
 void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sightings, Staged& st) {
   std::map<RobotPair, Key> firstKeptBack;  // pairs with nothing kept back before this batch
   for (const auto& [f, owner] : sightings) {
-    const RobotPair pair = std::minmax(keyRobot(f->key(0)), landmarkFrame(keyRobot(f->key(1))));
+    const RobotPair pair = std::minmax(keyRobot(f->key(0)), frameOf(f->key(1)));
     std::vector<PendingSighting>& list = pending_[pair];
     if (list.empty()) firstKeptBack.emplace(pair, f->key(1));
     list.push_back({f, owner});
@@ -52,8 +52,20 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
     return g == groups.end() ? r : g->second;
   };
   const OwnerTies ties = ownerTiesAt(&st);
-  // The frame groups, recomputed only after a join changed them.
-  std::map<std::uint32_t, std::uint32_t> groups = frameGroupsOf(currentInterEdges(&st), ties);
+  // The edges, and the landmarks some robot of their owner's group sights, change only when a
+  // pair's sightings go in; the frame groups are recomputed only after a join changed them.
+  std::map<FactorId, InterEdge> current;
+  std::set<Key> sightedInGroup;
+  std::map<std::uint32_t, std::uint32_t> groups;
+  auto refresh = [&](bool regroup) {
+    current = currentInterEdges(&st);
+    if (regroup) groups = frameGroupsOf(current, ties);
+    sightedInGroup.clear();
+    for (const auto& [id, e] : current)
+      if (e.landmark != 0 && groupOf(groups, e.r) == groupOf(groups, e.s))
+        sightedInGroup.insert(e.landmark);
+  };
+  refresh(true);
   for (auto it = pending_.begin(); it != pending_.end();) {
     const auto [a, b] = it->first;
     if (groupOf(groups, a) != groupOf(groups, b)) {
@@ -64,20 +76,15 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       // Would the pair's sightings join the frames (the rule frameGroupsOf applies to them once
       // anchored)? Only landmarks fixed in their owner's group count: one nobody has placed,
       // or only other robots sight, cannot align the frames.
-      std::map<FactorId, InterEdge> edges = currentInterEdges(&st);
-      std::set<Key> sightedInGroup;  // landmarks some robot of their owner's group sights
-      for (const auto& [id, e] : edges)
-        if (e.landmark != 0 && groupOf(groups, e.r) == groupOf(groups, e.s))
-          sightedInGroup.insert(e.landmark);
+      std::map<FactorId, InterEdge> edges = current;
       auto counts = [&](const PendingSighting& p) {
         const Key l = p.factor->key(1);
         return known(l) && (ties(l) || sightedInGroup.count(l));
       };
       for (const PendingSighting& p : it->second)
         if (counts(p))
-          edges[p.factor->id()] =
-              interEdgeOf(p.factor->key(0), p.factor->key(1), p.factor->varType(1),
-                          landmarkFrame(keyRobot(p.factor->key(1))));
+          edges[p.factor->id()] = interEdgeOf(p.factor->key(0), p.factor->key(1),
+                                              p.factor->varType(1), frameOf(p.factor->key(1)));
       const std::map<std::uint32_t, std::uint32_t> withPair = frameGroupsOf(edges, ties);
       if (groupOf(withPair, a) != groupOf(withPair, b)) {
         ++it;
@@ -127,12 +134,11 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
     const bool joined = groupOf(groups, a) != groupOf(groups, b);
     for (const PendingSighting& p : it->second) {
       placeSightedLandmark(*p.factor, st);
-      st.update.factors.push_back(
-          anchoredFactor(*p.factor, landmarkFrame(keyRobot(p.factor->key(1)))));
+      st.update.factors.push_back(anchoredFactor(*p.factor, frameOf(p.factor->key(1))));
       st.owners.push_back(p.owner);
     }
     it = pending_.erase(it);
-    if (joined) groups = frameGroupsOf(currentInterEdges(&st), ties);
+    refresh(joined);
   }
   // Once per pair until it is joined (at info: a front-end's sightings not in the map yet).
   for (const auto& [pair, landmark] : firstKeptBack)
@@ -195,7 +201,7 @@ void Engine::placeSightedLandmark(const Factor& f, Staged& st) {
   if (known(l)) return;  // earlier sightings (or the staged rounds) placed it
   // Every value it needs is known or staged (this batch's guesses and new anchors included).
   auto at = [&](Key k) -> const Values& { return *holder(k); };
-  const std::uint32_t r = keyRobot(x), s = landmarkFrame(keyRobot(l));
+  const std::uint32_t r = keyRobot(x), s = frameOf(l);
   const Key ar = anchorKey(r), as = anchorKey(s);
   Values one;
   if (f.varType(1) == VarType::Point3) {
