@@ -119,8 +119,8 @@ void RisamBackend::takeSecondLooks() {
 
 // Rejected closures whose predicted increase of the least-squares cost, rᵀ(I + JΣJᵀ)⁻¹r at
 // this optimum, is below what rejecting them costs in the truncated objective (their
-// threshold) are put in at weight 1 together; kept if the truncated cost
-// Σ_trusted χ² + Σ min(χ², threshold) went down at the new optimum, else taken out again.
+// cap) are put in at weight 1 together; kept if the truncated cost
+// Σ_trusted χ² + Σ min(χ², cap) went down at the new optimum, else taken out again.
 void RisamBackend::admitFinalCandidates() {
   for (int round = 0; round < options_.finalCandidateRounds; ++round) {
     const std::vector<FactorId> candidates = retryCandidates();
@@ -184,7 +184,7 @@ void RisamBackend::tryFreshStart() {
 // two wrong ones at χ² 1.2 and 0.6 under a rejection test of 1.7). Removing a cluster G
 // (ends within dropWindow poses, at most maxCluster closures) lowers the least-squares cost
 // by rᵀ(I − JΣJᵀ)⁻¹r (robust/closure_leverage.h; there 3.7 and 2.7, the true closures' at
-// most 1.4); those for which that beats their rejection thresholds are rejected together,
+// most 1.4); those for which that beats their caps in the truncated cost are rejected together,
 // solved, decided again, and kept if the truncated cost dropped (GncBackend's drop check).
 bool RisamBackend::dropBending() {
   if (!options_.dropBending || !innerIsam2_) return false;
@@ -209,7 +209,7 @@ bool RisamBackend::dropBending() {
   std::unordered_set<FactorId> drop;
   for (size_t c = 0; c < clusters.size(); ++c) {
     double thresholds = 0.0;
-    for (int i : clusters[c]) thresholds += rejectChi2(originals_[i]->dim());
+    for (int i : clusters[c]) thresholds += costCapChi2(originals_[i]->dim());
     if (gain[c] > thresholds)  // NaN: unknown, left
       for (int i : clusters[c]) drop.insert(originals_[i]->id());
   }
@@ -271,12 +271,12 @@ void RisamBackend::decideAndSolve(const std::vector<FactorId>* include) {
   }
 }
 
-double RisamBackend::truncatedCost() const {
+double RisamBackend::truncatedCost(double (RisamBackend::*cap)(int) const) const {
   const Values& x = inner_->estimate();
   double c = 0.0;
   for (const auto& f : originals_.factors()) {
     const double e = f->chi2(x);
-    c += graduated_.count(f->id()) ? std::min(e, rejectChi2(f->dim())) : e;
+    c += graduated_.count(f->id()) ? std::min(e, (this->*cap)(f->dim())) : e;
   }
   return c;
 }

@@ -106,7 +106,8 @@ double RisamBackend::undoCostChange(const std::vector<FactorId>& arriving, int b
       undone += uncertain ? std::min(before, threshold) : before;
     // else: a trusted factor of the arrival's new variables, at their initial values (0)
   }
-  return undone - truncatedCost();
+  // Online, as the rejection test judges: the wider cap is for optimize()'s answers.
+  return undone - truncatedCost(&RisamBackend::rejectChi2);
 }
 
 void RisamBackend::refeedSingly(std::vector<FactorId> ids) {
