@@ -104,7 +104,7 @@ std::unique_ptr<GncBackend> RisamBackend::solveBatchGnc(
   return gnc;
 }
 
-bool RisamBackend::adoptBatchGate() {
+bool RisamBackend::adoptBatchGate(bool widenThisAnswer) {
   ++batchGateChecks_;
   const std::unique_ptr<GncBackend> gnc = solveBatchGnc();
   if (!gnc) return false;
@@ -119,12 +119,17 @@ bool RisamBackend::adoptBatchGate() {
   if (!(t.gate > 0.0)) return false;
   bool wider = false, tighter = false;
   gateDirection(t.gate, wider, tighter);
-  if (!tighter) return false;
+  if (!tighter && !(widenThisAnswer && wider && t.gate > gate_)) return false;
   innerIsam2_->resetEstimate(x);
-  gate_ = t.gate;
-  tail_ = t.tail;
-  tight_ = true;
-  regraduatedAtGate_ = gate_;  // graduated below, at μ = 1 from the GNC's solution
+  if (tighter) {
+    gate_ = t.gate;
+    tail_ = t.tail;
+    tight_ = true;
+    regraduatedAtGate_ = gate_;  // graduated below, at μ = 1 from the GNC's solution
+  } else {
+    if (onlineGate_ < 0.0) onlineGate_ = gate_, onlineTail_ = tail_;  // back at the next update
+    gate_ = t.gate;
+  }
   const std::vector<FactorId> ids = graduatedIds();
   inner_->update(regraduate(ids, 1.0));
   inner_->optimize();

@@ -30,7 +30,7 @@ void RisamBackend::optimize() {
       graduated_.size() < static_cast<size_t>(options_.gateMinSamples) &&
       graduated_.size() != smallGateCheckAtCount_) {
     smallGateCheckAtCount_ = graduated_.size();
-    adoptBatchGate();
+    adoptBatchGate(true);
   }
   regraduateIfTightened();
   atTail_ = tight_;

@@ -675,5 +675,27 @@ TEST(RisamBatchGate, TakesATightGateFromABatchGncOverABentMap) {
   }
 }
 
+// smallGrid3D without outliers: 173 closures, too few for risam's own gate, so optimize()
+// judged at the defaults and rejected four true closures whose χ² at the optimum reach 14.8,
+// bending the map so that they were cheaper out (+8.6%). The batch GNC check reads a gate of
+// 10.5 medians from the same closures; optimize() now judges this answer at it (exact). The
+// online gate is back at the next update: judged at the defaults again, a closure at 14.8
+// fails the χ²₆(0.95) test.
+TEST(RisamBatchGate, WidensThisAnswersGateToABatchGncsOverAFewHeavyTailedClosures) {
+  const PoseGraphProblem grid = buildProblem(test::loadPrefix("smallGrid3D.g2o"));
+  RisamOptions unchecked;
+  unchecked.batchGateCheck = false;
+  const OffAndOn r = offAndOn(grid, grid, unchecked);
+  expectFixes(r, 1.05, "smallGrid3D without outliers", "the batch check");
+  EXPECT_NEAR(r.on.trueEdgesChi2, r.optimum, 1e-6 * r.optimum);
+  EXPECT_EQ(r.on.batchGatesAdopted, 1);
+
+  const std::unique_ptr<RisamBackend> b = makeRisam(RisamOptions{});
+  runOnline(grid, b.get());
+  EXPECT_TRUE(b->rejected().empty());
+  b->update(BackendUpdate{});
+  EXPECT_FALSE(b->rejected().empty());
+}
+
 }  // namespace
 }  // namespace loopd
