@@ -40,11 +40,11 @@ struct RisamOptions {
   /// The truncated cost that judges one answer against another at optimize() (the GNC look,
   /// the final candidates, the drop check, the fresh start) caps an uncertain factor at
   /// max(rejection test, χ²_dim(costCapProbability)) unless the gate is tight; online (a
-  /// contested arrival) the cap is the rejection test. At 0.95 a
-  /// true closure whose removal lowers the least squares by more than χ²_dim(0.95), one in
-  /// twenty, is cheaper rejected: kitti_00's 945-pose loop 3370 → 2425 (χ² 1.84 at the
-  /// optimum, removal gain 13.7 against 12.59) was, +35%. 0.99 is `gnc-tls`'s truncation,
-  /// and what the final candidates' marginal test already allows. ≤ 0: the rejection test.
+  /// contested arrival) the cap is the rejection test. Capped at χ²_dim(0.95), a true closure
+  /// whose removal lowers the least squares by more than that, one in twenty, is cheaper
+  /// rejected: kitti_00's 945-pose loop 3370 → 2425 (χ² 1.84 at the optimum, removal gain
+  /// 13.7 against 12.59) was, +35%. 0.99 is `gnc-tls`'s truncation, and what the final
+  /// candidates' marginal test already allows. ≤ 0: the rejection test.
   double costCapProbability = 0.99;
   /// Noise-aware shape and test (off when BackendOptions::robustParameter > 0 or
   /// tailExponent < 0): the gate g of GncOptions (min(medianFactor·q50, q99·(q99/q90)^e) of
@@ -338,7 +338,8 @@ class RisamBackend : public DecoratorBackend {
   /// estimate; null if it threw or its solution is not finite. With `interrupt`, throws
   /// GncInterrupted when that returns true.
   std::unique_ptr<GncBackend> solveBatchGnc(const std::function<bool()>& interrupt = {}) const;
-  /// RisamOptions::batchGateCheck: true if the GNC's tight gate and solution were taken.
+  /// RisamOptions::batchGateCheck: true if the GNC's tight gate and solution were taken (or,
+  /// with widenThisAnswer, a wider gate for this optimize() only).
   bool adoptBatchGate(bool widenThisAnswer = false);
   /// RisamOptions::gncLook (needs an inner iSAM2).
   void tryGncLook();
