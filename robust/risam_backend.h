@@ -323,6 +323,8 @@ class RisamBackend : public DecoratorBackend {
   /// on χ² scaled so that μ = 1 weighs as c² = shapeSquared does.
   SigShape sigShape(int dim) const;
   double rejectChi2(int dim) const;
+  /// The rejection test, raised to χ²_dim(p) unless the gate is tight (or p ≤ 0).
+  double rejectChi2AtLeast(int dim, double p) const;
   /// The cap of an uncertain factor in truncatedCost (RisamOptions::costCapProbability).
   double costCapChi2(int dim) const;
   /// With tight_: the tail test (optimize()'s rejection test, and what an arrival must fit to

@@ -33,10 +33,14 @@ double RisamBackend::rejectChi2(int dim) const {
   return gate_ > 0.0 ? std::max(d, gate_ * chi2Quantile(std::max(dim, 1), 0.5)) : d;
 }
 
-double RisamBackend::costCapChi2(int dim) const {
+double RisamBackend::rejectChi2AtLeast(int dim, double p) const {
   const double r = rejectChi2(dim);
-  if (tight_ || !(options_.costCapProbability > 0.0)) return r;
-  return std::max(r, chi2Quantile(std::max(dim, 1), options_.costCapProbability));
+  if (tight_ || !(p > 0.0)) return r;
+  return std::max(r, chi2Quantile(std::max(dim, 1), p));
+}
+
+double RisamBackend::costCapChi2(int dim) const {
+  return rejectChi2AtLeast(dim, options_.costCapProbability);
 }
 
 double RisamBackend::tailChi2(int dim) const {

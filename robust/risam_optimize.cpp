@@ -305,11 +305,8 @@ std::vector<FactorId> RisamBackend::retryCandidates() {
     if (it == graduated_.end()) continue;
     ++tested;
     const Factor& f = *it->second.original;
-    const double retry =
-        tight_ ? rejectChi2(f.dim())
-               : std::max(chi2Quantile(std::max(f.dim(), 1), options_.retryProbability),
-                          rejectChi2(f.dim()));
-    if (predictedChi2(f) <= retry) out.push_back(id);
+    if (predictedChi2(f) <= rejectChi2AtLeast(f.dim(), options_.retryProbability))
+      out.push_back(id);
   }
   return out;
 }

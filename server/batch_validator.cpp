@@ -417,7 +417,7 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
   for (const auto& a : b.ambiguous)
     for (const auto& f : a.alternatives)
       namespacePrior(f, a.id, "ambiguous " + std::to_string(a.id) + " " + itemName(f, a.id));
-  // Inter-robot alternatives: an alternative cannot create the anchor that joins two robots''
+  // Inter-robot alternatives: an alternative cannot create the anchor that joins two robots'
   // frames (under "none" or another alternative the anchor would be unconstrained, and each
   // alternative implies another anchor value), so its robots must already share a frame
   // through certain inter-robot factors (earlier ones or this batch's own).
