@@ -114,6 +114,12 @@ struct GncOptions {
   /// After the checks, re-estimate the gate from the final solution (up to maxGateRounds
   /// times, while it shrinks by more than widenFactor), decide again and re-run the checks.
   bool regateAtEnd = true;
+  /// TLS, the gate not acting but the tail gate wider than c̄² (torus3D): when every rejected
+  /// closure misfits by less than medianFactor × the noise scale × χ²_dim(0.5), re-admit them
+  /// together, decide again against c̄², and keep that if its truncated cost capped at
+  /// max(c̄², the tail gate) is lower — true closures that hold tension together cost less
+  /// rejected at c̄² alone.
+  bool admitTogetherAtTail = true;
   int checkRounds = 4;
   int admitWindow = 50;
   int dropWindow = 10;

@@ -57,6 +57,7 @@ void GncBackend::Run::execute() {
   solveToConvergence();
   runChecks(0);
   regateAtEnd();
+  admitTogetherAtTail();
   if (batchStartCandidate_ && rejectedCount() == 0) tryBatchStart();
   reason_ = firstReason + log_;
   report();
@@ -196,10 +197,12 @@ void GncBackend::Run::refine(int cap) {
 }
 
 // The truncated cost every candidate minimizes: trusted χ² + Σ min(χ², gate).
-double GncBackend::Run::tlsCost() const {
+double GncBackend::Run::tlsCost() const { return tlsCost(gate_); }
+
+double GncBackend::Run::tlsCost(const std::vector<double>& caps) const {
   double cost = 0.0;
   for (int i = 0; i < n_; ++i)
-    cost += c2_[i] > 0.0 ? std::min(r2_[i], gate_[i]) : graph_[i]->chi2(estimate_);
+    cost += c2_[i] > 0.0 ? std::min(r2_[i], caps[i]) : graph_[i]->chi2(estimate_);
   return cost;
 }
 
@@ -295,8 +298,8 @@ void GncBackend::Run::judgeCandidates() {
 // with every closure (none of them an outlier by this answer), is then the better start for
 // that least squares. Its GNC, solved to convergence, replaces the answer only if it rejects
 // nothing either and is cheaper at the gate: one that rejects closures of clean data can be
-// cheaper at the gate too (kitti_00: a long loop whose removal gains more than its
-// threshold; torus3D: 21 closures), and this check is not there to change decisions.
+// cheaper at the gate too (kitti_00 under gnc-gm: a long loop whose removal gains more than
+// its threshold), and this check is not there to change decisions.
 void GncBackend::Run::tryBatchStart() {
   const Values batchStart = initializeLinearFromLowestPose(graph_, start_);
   if (batchStart.size() != estimate_.size()) return;

@@ -41,7 +41,8 @@ class GncBackend::Run {
   void gncPass(bool first, bool fromOdometry = false, const Values* from = nullptr);
   void refine(int cap);
   void solveToConvergence();
-  double tlsCost() const;
+  double tlsCost() const;  // at gate_
+  double tlsCost(const std::vector<double>& caps) const;
   Candidate snapshot() const;
   void restore(const Candidate& c);
   int rejectedCount() const;
@@ -58,6 +59,7 @@ class GncBackend::Run {
   bool estimateGate(std::vector<double>& out);
   bool shrinkGate();
   void readmitAtTail(double cap);
+  void admitTogetherAtTail();
   void regateAtEnd();
 
   // Checks of single decisions and the consistent-set start (gnc_checks.cpp).

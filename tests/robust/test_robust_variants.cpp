@@ -459,5 +459,21 @@ TEST(GncChecks, AdmitOnlyWithinTheNoise) {
   expectExact(r.on, ref);
 }
 
+// torus3D's first 1000 poses, clean. Its closures' tail reaches a little past c̄² (the tail
+// gate about 4.6 × χ²₆(0.5), within widenFactor of c̄² = 16.81, so the gate does not act), and
+// at c̄² twelve stiff true closures that hold tension together cost less rejected than kept
+// (χ² +8%). Judged at the tail gate, keeping them is cheaper: re-admitted together, the
+// answer is the optimum. Both halves are checked.
+TEST(GncChecks, AdmitTogetherAtTheTailGateOnCleanTorus) {
+  const Reference& ref = reference("torus3D.g2o:1000");
+  const tools::OutlierResult data = protocolOutliers(ref, 0, OutlierMode::Random);
+  const OffAndOn r = offAndOn(data, ref, "torus3D:1000 clean, together at the tail",
+                              [](GncOptions& g, bool on) { g.admitTogetherAtTail = on; });
+  EXPECT_GE(r.off.rejected, 5) << "c̄² no longer rejects true closures here";
+  EXPECT_GT(r.off.inlierChi2, 1.02 * ref.optimumChi2);
+  EXPECT_EQ(r.on.rejected, 0);
+  EXPECT_NEAR(r.on.inlierChi2, ref.optimumChi2, 1e-6 * ref.optimumChi2);
+}
+
 }  // namespace
 }  // namespace loopd
