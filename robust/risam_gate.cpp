@@ -113,13 +113,7 @@ bool RisamBackend::adoptBatchGate(bool widenThisAnswer) {
   const std::unique_ptr<GncBackend> gnc = solveBatchGnc();
   if (!gnc) return false;
   const Values& x = gnc->estimate();
-  const std::vector<FactorId> out = gnc->rejected();
-  const std::unordered_set<FactorId> rejectedByGnc(out.begin(), out.end());
-  std::vector<double> q;
-  for (const auto& [id, g] : graduated_)
-    if (!rejectedByGnc.count(id))
-      q.push_back(g.original->chi2(x) / chi2Quantile(std::max(g.original->dim(), 1), 0.5));
-  const TailGate t = tailGate(q, options_.tailExponent, options_.medianFactor);
+  const TailGate t = batchTailGate(*gnc);
   if (!(t.gate > 0.0)) return false;
   bool wider = false, tighter = false;
   gateDirection(t.gate, wider, tighter);
@@ -140,6 +134,47 @@ bool RisamBackend::adoptBatchGate(bool widenThisAnswer) {
   markFarOut(ids);
   ++batchGatesAdopted_;
   return true;
+}
+
+TailGate RisamBackend::batchTailGate(const GncBackend& gnc) const {
+  const Values& x = gnc.estimate();
+  const std::vector<FactorId> out = gnc.rejected();
+  const std::unordered_set<FactorId> rejectedByGnc(out.begin(), out.end());
+  std::vector<double> q;
+  for (const auto& [id, g] : graduated_)
+    if (!rejectedByGnc.count(id))
+      q.push_back(g.original->chi2(x) / chi2Quantile(std::max(g.original->dim(), 1), 0.5));
+  return tailGate(q, options_.tailExponent, options_.medianFactor);
+}
+
+bool RisamBackend::releaseTightGate(const GncBackend& gnc) {
+  if (!tight_ || !options_.releaseTightGate) return false;
+  const TailGate t = batchTailGate(gnc);
+  if (!(t.gate > 0.0)) return false;
+  bool wider = false, tighter = false;
+  gateDirection(t.gate, wider, tighter);
+  if (tighter) return false;
+  tight_ = false;
+  atTail_ = false;
+  gate_ = t.gate;
+  tail_ = 0.0;
+  onlineGate_ = -1.0;  // released for good: no online tight gate to go back to
+  regraduatedAtGate_ = 0.0;
+  return true;
+}
+
+RisamBackend::GateState RisamBackend::gateState() const {
+  return {gate_, onlineGate_, onlineTail_, tail_, regraduatedAtGate_, tight_, atTail_};
+}
+
+void RisamBackend::setGateState(const GateState& s) {
+  gate_ = s.gate;
+  onlineGate_ = s.onlineGate;
+  onlineTail_ = s.onlineTail;
+  tail_ = s.tail;
+  regraduatedAtGate_ = s.regraduatedAtGate;
+  tight_ = s.tight;
+  atTail_ = s.atTail;
 }
 
 std::vector<FactorId> RisamBackend::graduatedIds() const {

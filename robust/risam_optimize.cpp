@@ -67,13 +67,15 @@ void RisamBackend::optimize() {
 }
 
 // Judged at the gate like the second looks; a kept answer is then decided against the tail.
+// A tight gate the GNC's answer does not confirm is released first (releaseTightGate), both
+// answers are judged at the released gate, and the release stands only if the GNC's is kept.
 void RisamBackend::tryGncLook() {
   if (!options_.gncLook || !innerIsam2_) return;
   if (gncLookAtCount_ > 0 && static_cast<double>(graduated_.size()) <
                                  options_.gncLookGrowth * static_cast<double>(gncLookAtCount_))
     return;
   atTail_ = false;
-  const Answer before = answer();
+  Answer before = answer();
   std::unique_ptr<GncBackend> gnc;
   try {
     gnc = solveBatchGnc(options_.interrupt);
@@ -87,11 +89,19 @@ void RisamBackend::tryGncLook() {
   ++gncLooks_;
   bool kept = false;
   if (gnc) {
+    const GateState tightState = gateState();
+    const bool released = releaseTightGate(*gnc);
+    if (released) before.cost = truncatedCost();  // the estimate is still the answer before
     innerIsam2_->resetEstimate(gnc->estimate());
     decideAndSolve(nullptr);
     admitFinalCandidates();
     kept = truncatedCost() < before.cost * (1.0 - 1e-9);
-    if (!kept) restore(before);
+    if (!kept) {
+      restore(before);
+      if (released) setGateState(tightState);  // released only with an answer that gains
+    } else if (released) {
+      ++tightGatesReleased_;
+    }
   }
   atTail_ = tight_;
   if (!kept) return;
