@@ -84,8 +84,7 @@ void GncBackend::optimize() {
   // empty if there is none), one of the GNC's starting points.
   Values odometryStart;
   bool batchStartCandidate = false;  // the first solve started from the trusted factors
-  const bool wantOdometryStart = gnc_.odometryStart && gnc_.trustedInitialization &&
-                                 (firstSolve_ ? options_.linearInitialization : trustedInit_);
+  const bool wantOdometryStart = gnc_.odometryStart && gnc_.trustedInitialization;
   if (wantOdometryStart) odometryStart = trustedLinearStart();
   if (firstSolve_ && options_.linearInitialization && gnc_.trustedInitialization) {
     trustedInit_ = true;

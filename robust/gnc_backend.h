@@ -35,7 +35,10 @@ struct GncOptions {
   bool trustedInitialization = true;
   /// Also run the GNC from the odometry start (the trusted factors' linear initialization,
   /// without the least-squares solve over every closure) and keep it if its truncated cost is
-  /// lower (needs trustedInitialization and a linear initialization).
+  /// lower (needs trustedInitialization). On every solve, also without a linear
+  /// initialization of the values (the server's, `--init file`): the server's gnc-tls ran
+  /// without it, and without the consistent-set start that follows it, and ended bent by
+  /// grouped wrong closures (manhattan + 100 in groups, ATE 5.9 m).
   bool odometryStart = true;
   /// If the first solve's answer rejects nothing, it is a least-squares solution in the
   /// trusted start's basin: also run the GNC from the batch solvers' linear initialization
