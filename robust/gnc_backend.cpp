@@ -86,8 +86,8 @@ void GncBackend::optimize() {
   bool batchStartCandidate = false;  // the first solve started from the trusted factors
   const bool wantOdometryStart = gnc_.odometryStart && gnc_.trustedInitialization;
   if (wantOdometryStart) odometryStart = trustedLinearStart();
-  if (firstSolve_ && options_.linearInitialization && gnc_.trustedInitialization) {
-    trustedInit_ = true;
+  // The first solve only: the flag is cleared below.
+  if (options_.linearInitialization && gnc_.trustedInitialization) {
     // Linear initialization from the trusted factors only; the base class must not redo it
     // with the outliers included.
     Values start = odometryStart.size() > 0 ? odometryStart : trustedLinearStart();
@@ -101,7 +101,6 @@ void GncBackend::optimize() {
     if (start.size() > 0) estimate_ = start;
     options_.linearInitialization = false;
   }
-  firstSolve_ = false;
 
   Run(*this, std::move(odometryStart), batchStartCandidate).execute();
 }

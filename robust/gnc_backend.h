@@ -190,8 +190,6 @@ class GncBackend : public BatchBackend {
   int outer_ = 0;
   double scale_ = 0.0, tailGate_ = 0.0;
   int refine_ = 0;
-  bool firstSolve_ = true;
-  bool trustedInit_ = false;
 };
 
 }  // namespace loopd

@@ -20,20 +20,23 @@ double median(std::vector<double> v, double fallback) {
 }  // namespace
 
 // Sets the weights of `factors` to `weight`, re-solves, decides against the gate, and keeps
-// the result if the truncated cost dropped (else goes back). Logs what happened as `what`.
+// the result if the truncated cost (capped at the gate, or at `judgeCaps`) dropped (else goes
+// back). Logs what happened as `what`.
 bool GncBackend::Run::tryDecisions(const std::vector<int>& factors, double weight, const char* what,
-                                   int cap) {
+                                   int cap, const std::vector<double>* judgeCaps) {
   const Candidate previous = snapshot();
+  auto cost = [&] { return judgeCaps ? tlsCost(*judgeCaps) : tlsCost(); };
+  const double before = cost();
   for (int i : factors) weights_[i] = weight;
   ++b_.refine_;
   solveWeighted(cap);
   refine(cap);
-  const double after = tlsCost();
-  const bool kept = after < previous.cost;
+  const double after = cost();
+  const bool kept = after < before;
   if (!kept) restore(previous);
-  char buf[160];
+  char buf[224];
   std::snprintf(buf, sizeof buf, "; %s: %zu closures, %s (truncated cost %.6g -> %.6g)", what,
-                factors.size(), kept ? "kept" : "dropped", previous.cost, after);
+                factors.size(), kept ? "kept" : "dropped", before, after);
   log_ += buf;
   return kept;
 }

@@ -170,21 +170,11 @@ void GncBackend::Run::admitTogetherAtTail() {
       wider = wider || caps[i] > gate_[i];
     }
   if (!wider) return;
-  const Candidate previous = snapshot();
-  const double before = tlsCost(caps);
-  for (int i : rejectedOnes) weights_[i] = 1.0;
-  ++b_.refine_;
-  solveWeighted(0);
-  refine(0);
-  const double after = tlsCost(caps);
-  const bool kept = after < before;
-  if (!kept) restore(previous);
-  char buf[200];
-  std::snprintf(buf, sizeof buf,
-                "; the %zu rejected re-admitted together, judged at the tail gate %.3g x "
-                "chi2_dim(0.5): %s (truncated cost %.6g -> %.6g)",
-                rejectedOnes.size(), b_.tailGate_, kept ? "kept" : "dropped", before, after);
-  log_ += buf;
+  char what[96];
+  std::snprintf(what, sizeof what,
+                "rejected re-admitted together, judged at the tail gate %.3g x chi2_dim(0.5)",
+                b_.tailGate_);
+  tryDecisions(rejectedOnes, 1.0, what, 0, &caps);
 }
 
 }  // namespace loopd

@@ -63,7 +63,8 @@ class GncBackend::Run {
   void regateAtEnd();
 
   // Checks of single decisions and the consistent-set start (gnc_checks.cpp).
-  bool tryDecisions(const std::vector<int>& factors, double weight, const char* what, int cap);
+  bool tryDecisions(const std::vector<int>& factors, double weight, const char* what, int cap,
+                    const std::vector<double>* judgeCaps = nullptr);
   std::vector<int> uncertainWhere(bool accepted) const;
   std::vector<double> predictedNet(const std::vector<std::vector<int>>& groups, GroupChange change);
   bool admitFitting(int cap);

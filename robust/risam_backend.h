@@ -361,9 +361,9 @@ class RisamBackend : public DecoratorBackend {
   TailGate batchTailGate(const GncBackend& gnc) const;
   /// RisamOptions::releaseTightGate: true if the tight gate was released (gate_ from `gnc`).
   bool releaseTightGate(const GncBackend& gnc);
-  /// The gate's members, to undo a release.
+  /// The gate's members a release changes, to undo it.
   struct GateState {
-    double gate, onlineGate, onlineTail, tail, regraduatedAtGate;
+    double gate, onlineGate, tail, regraduatedAtGate;
     bool tight, atTail;
   };
   GateState gateState() const;

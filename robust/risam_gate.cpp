@@ -164,13 +164,12 @@ bool RisamBackend::releaseTightGate(const GncBackend& gnc) {
 }
 
 RisamBackend::GateState RisamBackend::gateState() const {
-  return {gate_, onlineGate_, onlineTail_, tail_, regraduatedAtGate_, tight_, atTail_};
+  return {gate_, onlineGate_, tail_, regraduatedAtGate_, tight_, atTail_};
 }
 
 void RisamBackend::setGateState(const GateState& s) {
   gate_ = s.gate;
   onlineGate_ = s.onlineGate;
-  onlineTail_ = s.onlineTail;
   tail_ = s.tail;
   regraduatedAtGate_ = s.regraduatedAtGate;
   tight_ = s.tight;

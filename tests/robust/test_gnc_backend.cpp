@@ -12,25 +12,10 @@
 #include "robust/gnc_backend.h"
 #include "solvers/problem/pose_graph_problem.h"
 #include "tests/robust/dataset_prefix.h"
+#include "tests/robust/position_gap.h"
 
 namespace loopd {
 namespace {
-
-// The largest distance between a variable's position in two estimates, over the variables
-// some factor of `graph` touches (one whose every sighting was rejected is left undetermined).
-double largestPositionGap(const Values& a, const Values& b, const std::vector<FactorPtr>& graph) {
-  std::set<Key> touched;
-  for (const FactorPtr& f : graph)
-    for (int k = 0; k < f->size(); ++k) touched.insert(f->key(k));
-  double gap = 0.0;
-  for (Key key : touched) {
-    const int s = a.slot(key), t = b.slot(key);
-    const Vec2 pa = a.type(s) == VarType::SE2 ? a.se2(s).t() : a.point2(s);
-    const Vec2 pb = b.type(t) == VarType::SE2 ? b.se2(t).t() : b.point2(t);
-    gap = std::max(gap, (pa - pb).norm());
-  }
-  return gap;
-}
 
 class GncOnVictoriaPark : public testing::TestWithParam<std::string> {};
 
@@ -54,7 +39,7 @@ TEST_P(GncOnVictoriaPark, RejectsOnlyTheTailAndReachesTheOptimumOfWhatItKeeps) {
                      kept.factors.end());
   auto lm = makeBackend("lm");
   lm->update(kept);
-  EXPECT_LT(largestPositionGap(lm->estimate(), gnc->estimate(), kept.factors),
+  EXPECT_LT(test::largestPositionGap(lm->estimate(), gnc->estimate(), &kept.factors),
             0.05);  // metres, on 300 m
 }
 

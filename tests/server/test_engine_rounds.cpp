@@ -4,11 +4,11 @@
 // risam, manhattan with grouped wrong closures under gnc-tls.
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <vector>
 
 #include "solvers/io/dataset_reader.h"
 #include "tests/robust/dataset_prefix.h"
+#include "tests/robust/position_gap.h"
 #include "tests/server/engine_harness.h"
 #include "tests/server/live_util.h"
 #include "tools/common/feed_order.h"
@@ -52,17 +52,6 @@ Replay queuedAtOnce(const io::Dataset& ds, int posesPerUpdate, const std::string
   EXPECT_EQ(h.engine.counters().accepted, pub.batchesPublished());
   return {h.engine.backend().chi2(), h.engine.counters().updates, h.engine.backend().rejected(),
           h.engine.backend().estimate()};
-}
-
-// The largest distance between a 2D pose's position in two estimates (by key).
-double largestPositionGap(const Values& a, const Values& b) {
-  double gap = 0.0;
-  for (int s = 0; s < a.size(); ++s) {
-    const int t = b.slot(a.key(s));
-    if (t >= 0 && a.type(s) == VarType::SE2)
-      gap = std::max(gap, (a.se2(s).t() - b.se2(t).t()).norm());
-  }
-  return gap;
 }
 
 Replay queuedVictoriaPark(int posesPerUpdate, const std::string& solver = "isam2", int robots = 1,
@@ -109,7 +98,7 @@ TEST(EngineRounds, GncTlsOnTheServerRejectsGroupedWrongClosuresAndReachesTheOpti
   const Replay r = queuedAtOnce(tools::addOutliers(clean, o).graph, 100, "gnc-tls");
   const Replay optimum = queuedAtOnce(clean, 100, "lm");
   EXPECT_EQ(r.rejected.size(), 50u);
-  EXPECT_LT(largestPositionGap(r.estimate, optimum.estimate), 1e-3);  // metres
+  EXPECT_LT(test::largestPositionGap(r.estimate, optimum.estimate), 1e-3);  // metres
 }
 
 }  // namespace
