@@ -2,19 +2,23 @@
 // tools read.
 //
 //   loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o [--covariances COV.txt]
-//                [--until-quiet SECONDS] [--until-batches N] [--quiet]
+//                [--decisions STATS.json] [--until-quiet SECONDS] [--until-batches N] [--quiet]
 //
 // EST.g2o: one VERTEX_SE2 / VERTEX_SE3:QUAT line per pose (id = pose index, the value as
 // published: in the common frame once its robot is joined), then VERTEX_XY / VERTEX_TRACKXYZ
 // per landmark. COV.txt: the latest-pose covariances the server published, one line per pose
-// (`POSE id` then the upper triangle, loopd-solve's format). Without --until-quiet it records
+// (`POSE id` then the upper triangle, loopd-solve's format). STATS.json: the server's decisions
+// on uncertain factors in loopd-solve's stats form, which loopd-eval reads: "rejected" (factor
+// ids, which are the file's edge indices when loopd-feed sent them; merged over senders) and,
+// for ambiguous measurements, "chosen" (alternatives in id order). Without --until-quiet it records
 // until SIGINT/SIGTERM; with it, it exits once no new estimate arrived for that long (status
 // heartbeats do not count; the wait starts with the first estimate). With --until-batches it
 // exits once the server's status says it has handled N distinct batches (accepted, rejected or
 // expired; resends do not count), holds and queues none, and its estimate is converged: an end
 // that does not depend on the server's speed (one long update can outlast any quiet time).
 // At start it asks the server for a full snapshot (REQUEST_ESTIMATE), so it may join a running
-// server; before it exits it asks for one more (repairs any chunk udpm lost).
+// server; before it exits it asks for one more (repairs any chunk udpm lost), and with
+// --decisions for the complete decision listing (REQUEST_STATUS), which it waits for.
 #include <lcm/lcm-cpp.hpp>
 
 #include <algorithm>
@@ -26,10 +30,12 @@
 #include <map>
 #include <string>
 
+#include "client/decision_table.h"
 #include "client/estimate_subscriber.h"
 #include "loopd/command_t.hpp"
 #include "solvers/io/estimate_writer.h"
 #include "tools/common/cli.h"
+#include "tools/common/json_writer.h"
 
 using namespace loopd;
 
@@ -40,13 +46,41 @@ extern "C" void onSignal(int) { g_stop = true; }
 
 const char* kUsage =
     "usage: loopd-listen [--lcm-url URL] [--channel-prefix P] --out EST.g2o\n"
-    "                    [--covariances COV.txt] [--until-quiet SECONDS] [--until-batches N]\n"
-    "                    [--quiet]\n";
+    "                    [--covariances COV.txt] [--decisions STATS.json]\n"
+    "                    [--until-quiet SECONDS] [--until-batches N] [--quiet]\n";
+
+// The decisions as loopd-solve's stats: rejected factor ids, and the chosen alternative of each
+// ambiguous measurement in id order (loopd-feed numbers them in file order).
+tools::JsonObject decisionStats(const client::DecisionTable& table, const loopd::status_t& st) {
+  std::vector<std::int64_t> rejected, chosen;
+  std::map<std::int64_t, std::int64_t> chosenById;
+  std::int64_t uncertain = 0;
+  for (const auto& [name, d] : table.decisions()) {
+    if (d.ambiguous) {
+      chosenById[name.second] = d.alternative;
+      continue;
+    }
+    ++uncertain;
+    if (!d.accepted) rejected.push_back(name.second);
+  }
+  std::sort(rejected.begin(), rejected.end());
+  rejected.erase(std::unique(rejected.begin(), rejected.end()), rejected.end());
+  for (const auto& [id, alternative] : chosenById) chosen.push_back(alternative);
+  tools::JsonObject o;
+  o.add("solver", st.solver)
+      .add("update_seq", st.update_seq)
+      .add("converged", st.converged != 0)
+      .add("final_chi2", st.chi2)
+      .add("uncertain_factors", uncertain)
+      .add("rejected", rejected);
+  if (!chosenById.empty()) o.add("chosen", chosen);
+  return o;
+}
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string url, prefix = "LOOPD_", out, cov;
+  std::string url, prefix = "LOOPD_", out, cov, decisionsOut;
   double quietSeconds = -1.0;
   long long untilBatches = -1;
   bool quiet = false;
@@ -65,6 +99,8 @@ int main(int argc, char** argv) {
         out = val();
       else if (a == "--covariances")
         cov = val();
+      else if (a == "--decisions")
+        decisionsOut = val();
       else if (a == "--until-quiet") {
         quietSeconds = tools::parseNumberFlag(a, val(), 0.0, 1e9);
       } else if (a == "--until-batches") {
@@ -96,9 +132,12 @@ int main(int argc, char** argv) {
     lastEstimate = Clock::now();
     any = true;
   });
+  client::DecisionTable decisions;
+  sub.onForget([&](std::int64_t) { decisions.clear(); });
   // The server has handled every batch expected and published the optimum of its graph.
   bool done = false;
   sub.onStatus([&](const loopd::status_t& st) {
+    decisions.apply(st);
     // Duplicates do not count: a resend of a handled batch is not a new one.
     const long long handled = st.batches_accepted + st.batches_rejected + st.batches_expired;
     if (untilBatches > 0 && handled >= untilBatches && st.converged && st.queue_depth == 0 &&
@@ -128,20 +167,46 @@ int main(int argc, char** argv) {
   lcm.publish(prefix + "COMMAND", &req);
 
   bool finalRequested = false;
-  auto quietFor = [&] {
-    return std::chrono::duration<double>(Clock::now() - lastEstimate).count();
+  auto since = [&](Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
   };
+  // With --decisions: the complete listing, asked again if a chunk is lost or no reply comes.
+  constexpr std::int64_t kListingRequest = 3;
+  constexpr int kListingAsks = 5;
+  Clock::time_point listingAsked{};
+  int listingAsks = 0;
+  auto askListing = [&] {
+    loopd::command_t s = req;
+    s.request_id = kListingRequest;
+    s.command = loopd::command_t::REQUEST_STATUS;
+    lcm.publish(prefix + "COMMAND", &s);
+    listingAsked = Clock::now();
+    ++listingAsks;
+  };
+  bool listingMissing = false;
   while (!g_stop) {
     lcm.handleTimeout(100);
     if (finalRequested) {
       // The last snapshot is in once its estimates stop.
-      if (quietFor() >= (quietSeconds >= 0 ? std::min(quietSeconds, 1.0) : 1.0)) break;
-    } else if (done || (quietSeconds >= 0 && any && quietFor() >= quietSeconds)) {
+      const bool listingIn =
+          decisionsOut.empty() || decisions.lastListingRequest() == kListingRequest;
+      if (listingIn &&
+          since(lastEstimate) >= (quietSeconds >= 0 ? std::min(quietSeconds, 1.0) : 1.0))
+        break;
+      if (!listingIn && since(listingAsked) >= 2.0) {
+        if (listingAsks >= kListingAsks) {
+          listingMissing = true;
+          break;
+        }
+        askListing();
+      }
+    } else if (done || (quietSeconds >= 0 && any && since(lastEstimate) >= quietSeconds)) {
       // Ask for one full snapshot (repairs any chunk udpm lost), then stop after it.
       finalRequested = true;
       req.request_id = 2;
       lcm.publish(prefix + "COMMAND", &req);
       lastEstimate = Clock::now();
+      if (!decisionsOut.empty()) askListing();
     }
   }
 
@@ -188,6 +253,28 @@ int main(int argc, char** argv) {
       std::fputc('\n', f);
     }
     std::fclose(f);
+  }
+  if (listingMissing) {
+    std::fprintf(stderr,
+                 "loopd-listen: no complete decision listing from the server (asked %d times): %s "
+                 "not written\n",
+                 kListingAsks, decisionsOut.c_str());
+    return 1;
+  }
+  if (!decisionsOut.empty()) {
+    // Stopped by a signal, the table is what the statuses so far said (no final listing).
+    try {
+      decisionStats(decisions, sub.lastStatus()).writeFile(decisionsOut);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "loopd-listen: %s\n", e.what());
+      return 1;
+    }
+    if (!quiet) {
+      long long rejected = 0;
+      for (const auto& [name, d] : decisions.decisions()) rejected += d.accepted ? 0 : 1;
+      std::fprintf(stderr, "loopd-listen: %zu decisions (%lld rejected) written to %s\n",
+                   decisions.decisions().size(), rejected, decisionsOut.c_str());
+    }
   }
   if (!quiet) {
     const auto st = sub.lastStatus();

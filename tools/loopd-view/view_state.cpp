@@ -265,7 +265,7 @@ void ViewState::refuseBatch(const BatchName& batch) {
 /// A complete listing names every uncertain factor the server has: the rest are gone.
 void ViewState::pruneClosuresWithoutDecision() {
   for (auto it = closures_.begin(); it != closures_.end();)
-    it = decisions_.count(it->first) ? std::next(it) : closures_.erase(it);
+    it = decisions_.decisions().count(it->first) ? std::next(it) : closures_.erase(it);
 }
 
 void ViewState::commandMsg(const lcm::ReceiveBuffer*, const std::string&, const loopd::command_t* m,
@@ -283,8 +283,6 @@ void ViewState::onForget() {
   dirty_ = true;
   closures_.clear();
   decisions_.clear();
-  pendingFull_.clear();
-  pendingFullSeq_ = -1;
   seenBatches_.clear();
   // Batches from before a RESET command belong to the dropped graph; later ones (and all, after
   // a restart, which no command announces) may still be settled by the server.
@@ -309,28 +307,21 @@ void ViewState::onStatus(const loopd::status_t& s) {
 }
 
 void ViewState::applyDecisions(const loopd::status_t& s) {
-  auto put = [](std::map<FactorName, Decision>& t, const loopd::loop_decision_t& d) {
-    if (d.ambiguous) return;  // ambiguous measurements have no single pair of endpoints
-    t[{d.sender, d.factor_id}] = Decision{d.accepted != 0, d.weight};
-  };
-  if (!s.decisions_full) {
-    for (const auto& d : s.decisions) {
-      put(decisions_, d);
-      if (!d.ambiguous) adoptBatchWith({d.sender, d.factor_id});
-    }
-    return;
-  }
-  if (s.decisions_chunk_index == 0 || s.update_seq != pendingFullSeq_) {
-    pendingFull_.clear();
-    pendingFullSeq_ = s.update_seq;
-  }
-  for (const auto& d : s.decisions) put(pendingFull_, d);
-  if (s.decisions_chunk_index + 1 >= s.decisions_chunk_count) {
-    decisions_.swap(pendingFull_);
-    pendingFull_.clear();
-    pendingFullSeq_ = -1;
-    pruneClosuresWithoutDecision();
-    for (const auto& [name, d] : decisions_) adoptBatchWith(name);
+  switch (decisions_.apply(s)) {
+    case client::DecisionTable::Applied::Changes:
+      for (const auto& d : s.decisions)
+        if (!d.ambiguous) adoptBatchWith({d.sender, d.factor_id});
+      break;
+    case client::DecisionTable::Applied::PartOfListing:
+      break;
+    case client::DecisionTable::Applied::ListingComplete:
+      pruneClosuresWithoutDecision();
+      for (const auto& [name, d] : decisions_.decisions())
+        if (!d.ambiguous) adoptBatchWith(name);
+      break;
+    case client::DecisionTable::Applied::ListingBroken:
+      wantEverything_ = true;  // a chunk was lost: ask for the listing again
+      break;
   }
 }
 
@@ -535,8 +526,8 @@ std::string ViewState::renderJson(std::uint64_t seq) {
   o += ",\"links\":[";
   first = true;
   for (const auto& [name, cl] : closures_) {
-    const auto d = decisions_.find(name);
-    if (d == decisions_.end()) continue;  // pruned with the next complete listing
+    const auto d = decisions_.decisions().find(name);
+    if (d == decisions_.decisions().end()) continue;  // pruned with the next complete listing
     auto ra = ordinal.find(cl.a.robot), rb = ordinal.find(cl.b.robot);
     if (ra == ordinal.end() || rb == ordinal.end()) {
       ++unplaced;
@@ -566,11 +557,15 @@ std::string ViewState::renderJson(std::uint64_t seq) {
     o += ']';
   }
   o += ']';
-  for (const auto& [name, d] : decisions_)
+  std::int64_t closureDecisions = 0;  // ambiguous measurements have no single pair of ends
+  for (const auto& [name, d] : decisions_.decisions()) {
+    if (d.ambiguous) continue;
+    ++closureDecisions;
     if (!closures_.count(name)) {
       ++unmapped;
       unmappedRejected += d.accepted ? 0 : 1;
     }
+  }
   for (const auto& [arrival, b] : pending_)
     pendingClosures += static_cast<std::int64_t>(b.closures.size());
   o += ",\"link_counts\":{\"accepted\":";
@@ -582,7 +577,7 @@ std::string ViewState::renderJson(std::uint64_t seq) {
   o += ",\"unplaced\":";
   num(o, unplaced);
   o += ",\"decisions\":";
-  num(o, static_cast<std::int64_t>(decisions_.size()));
+  num(o, closureDecisions);
   o += ",\"unmapped_decisions\":";
   num(o, unmapped);
   o += ",\"unmapped_rejected\":";

@@ -23,6 +23,7 @@
 #include <string>
 #include <utility>
 
+#include "client/decision_table.h"
 #include "client/estimate_subscriber.h"
 #include "loopd/command_t.hpp"
 #include "loopd/factor_batch_t.hpp"
@@ -107,13 +108,7 @@ class ViewState {
   std::int64_t duplicates_ = 0;
   std::int64_t lastStatusSeq_ = 0;
   bool wantEverything_ = false;
-  struct Decision {
-    bool accepted = true;
-    double weight = 1.0;
-  };
-  std::map<FactorName, Decision> decisions_;
-  std::map<FactorName, Decision> pendingFull_;  // a chunked full listing being assembled
-  std::int64_t pendingFullSeq_ = -1;
+  client::DecisionTable decisions_;
   std::int64_t errors_ = 0;
   std::map<int, std::int64_t> errorsByCode_;
   std::deque<loopd::error_t> recentErrors_;
