@@ -160,7 +160,7 @@ SwitchableFactor::SwitchableFactor(std::index_sequence<I...>, FactorPtr inner, K
 }
 
 std::shared_ptr<SwitchableFactor> SwitchableFactor::make(FactorPtr inner, Key switchKey) {
-  return makeWrapper<SwitchableFactor>(inner, 3, switchKey);
+  return makeWrapper<SwitchableFactor>(inner, kMaxFactorKeys - 1, switchKey);
 }
 
 void SwitchableFactor::evaluate(const double* const* x, double* r, double* const* J) const {

@@ -68,7 +68,7 @@ class KernelFactor final : public Factor {
 
 class SwitchableFactor final : public Factor {
  public:
-  /// inner must have at most 3 keys; the switch is key size() − 1.
+  /// inner must have at most kMaxFactorKeys − 1 keys; the switch is key size() − 1.
   static std::shared_ptr<SwitchableFactor> make(FactorPtr inner, Key switchKey);
   template <size_t... I>
   SwitchableFactor(std::index_sequence<I...>, FactorPtr inner, Key switchKey);

@@ -21,6 +21,8 @@ const char* factorRoleName(FactorRole r) {
 
 Factor::Factor(std::initializer_list<std::pair<Key, VarType>> vars, int dim, FactorRole role)
     : dim_(dim), role_(role) {
+  if (vars.size() > static_cast<size_t>(kMaxFactorKeys))
+    throw std::invalid_argument("a factor has at most " + std::to_string(kMaxFactorKeys) + " keys");
   for (const auto& [k, t] : vars) {
     keys_[numKeys_] = k;
     varTypes_[numKeys_] = t;

@@ -1,5 +1,5 @@
 #pragma once
-// A factor: a whitened residual r(x) ∈ R^dim over up to four variables, with analytic
+// A factor: a whitened residual r(x) ∈ R^dim over up to five variables, with analytic
 // Jacobians written into caller-owned fixed-size buffers (no allocation per evaluation).
 // Whitened means r = U·e with UᵀU = Ω, so chi2 = rᵀr = eᵀΩe (g2o's convention).
 #include <Eigen/Core>
@@ -14,7 +14,8 @@
 namespace loopd {
 
 using FactorId = std::uint64_t;
-constexpr int kMaxFactorKeys = 4;  // 4: inter-robot factors through two anchors
+// 4: inter-robot factors through two anchors; 5: a switchable constraint's switch on one.
+constexpr int kMaxFactorKeys = 5;
 constexpr int kMaxResidualDim = 6;
 
 /// Which factors robust variants may down-weight: loop closures and landmark sightings are

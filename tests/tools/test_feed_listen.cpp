@@ -12,6 +12,7 @@
 #include "loopd/ambiguous_factor_t.hpp"
 #include "loopd/factor_batch_t.hpp"
 #include "tests/server/live_util.h"
+#include "tests/tools/feed_through_server.h"
 #include "tests/tools/landmark_world3d.h"
 
 using namespace loopd;
@@ -293,36 +294,6 @@ TEST(LoopdFeed, HypothesesGroupsBecomeAmbiguousFactors) {
   }
   EXPECT_EQ(groups, 15);
   EXPECT_EQ(factors, 2512 - 15);  // the true closures travel inside their groups
-}
-
-// `dataset` fed by loopd-feed with `feedArgs` to a fresh server (with `serverArgs`) until
-// `batches` are handled: what loopd-listen said at the end, and the server's log.
-void feedThroughServer(const std::string& name, const std::string& dataset, int batches,
-                       const std::vector<std::string>& feedArgs, std::string& said,
-                       std::string& log, const std::vector<std::string>& serverArgs = {}) {
-  const std::string url = uniqueUrl();
-  std::vector<std::string> server = {kLoopd, "--lcm-url", url};
-  server.insert(server.end(), serverArgs.begin(), serverArgs.end());
-  Proc srv = Proc::start(server, tmp(name + "_srv.log"));
-  ASSERT_TRUE(srv.waitForOutput("loopd: solver", 20)) << srv.output();
-  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", tmp(name + ".g2o"),
-                             "--until-batches", std::to_string(batches)},
-                            tmp(name + "_listen.log"));
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  std::vector<std::string> feed = {kFeed, dataset, "--rate", "2000", "--lcm-url", url, "--quiet"};
-  feed.insert(feed.end(), feedArgs.begin(), feedArgs.end());
-  ASSERT_EQ(runTool(feed, tmp(name + "_feed.log")), 0);
-  ASSERT_EQ(listen.wait(120), 0) << listen.output();
-  srv.kill(SIGINT);
-  EXPECT_EQ(srv.wait(20), 0);
-  said = listen.output();
-  log = srv.output();
-}
-
-// The server's χ² in loopd-listen's summary (NaN when it is not there).
-double chi2Said(const std::string& said) {
-  const size_t at = said.find("chi2 ");
-  return at == std::string::npos ? std::nan("") : std::stod(said.substr(at + 5));
 }
 
 // Victoria Park in two robots, interleaved, with `extra` loopd-feed flags: both robots end in
