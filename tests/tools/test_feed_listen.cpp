@@ -237,6 +237,57 @@ TEST(LoopdListen, WritesEstimateAndCovariancesThenExitsWhenQuiet) {
   EXPECT_EQ(line.rfind("VERTEX_SE2 0 ", 0), 0u) << line;
 }
 
+// --decisions: the server's complete decision listing, asked for at the end, in loopd-solve's
+// stats form; a file that cannot be written whole is an error (exit 1), as for every tool.
+TEST(LoopdListen, WritesTheDecisionsOrSaysItCannot) {
+  const std::string url = uniqueUrl();
+  Proc srv = Proc::start({kLoopd, "--lcm-url", url}, tmp("srv.log"));
+  ASSERT_TRUE(srv.waitForOutput("loopd: solver", 20)) << srv.output();
+  const std::string stats = tmp("decisions.json");
+  std::remove(stats.c_str());
+  Proc good = Proc::start({kListen, "--lcm-url", url, "--out", tmp("est_d.g2o"), "--decisions",
+                           stats, "--until-quiet", quietFor(1.5)},
+                          tmp("listen_d.log"));
+  Proc full = Proc::start({kListen, "--lcm-url", url, "--out", tmp("est_f.g2o"), "--decisions",
+                           "/dev/full", "--until-quiet", quietFor(1.5)},
+                          tmp("listen_f.log"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  ASSERT_EQ(runTool({kFeed, kData + "/intel.g2o", "--poses", "400", "--rate", "800", "--lcm-url",
+                     url, "--quiet"},
+                    tmp("feed_d.log")),
+            0);
+  ASSERT_EQ(good.wait(60), 0) << good.output();
+  EXPECT_EQ(full.wait(60), 1) << full.output();
+  EXPECT_NE(full.output().find("loopd-listen: cannot write /dev/full"), std::string::npos)
+      << full.output();
+  srv.kill(SIGINT);
+  EXPECT_EQ(srv.wait(20), 0);
+  std::stringstream text;
+  text << std::ifstream(stats).rdbuf();
+  const std::string j = text.str();
+  EXPECT_NE(j.find("\"solver\": \"isam2\""), std::string::npos) << j;
+  EXPECT_NE(j.find("\"rejected\": []"), std::string::npos) << j;  // plain isam2 keeps all
+  // Every loop closure among intel's first 400 poses (114) has its decision (counted from the
+  // file).
+  int closures = 0;
+  std::ifstream g(kData + "/intel.g2o");
+  std::string line;
+  while (std::getline(g, line)) {
+    std::istringstream in(line);
+    std::string tag;
+    long a = 0, b = 0;
+    if (in >> tag >> a >> b && tag.rfind("EDGE", 0) == 0 && a < 400 && b < 400 &&
+        std::labs(a - b) != 1)
+      ++closures;
+  }
+  ASSERT_GT(closures, 0);
+  EXPECT_NE(j.find("\"uncertain_factors\": " + std::to_string(closures)), std::string::npos)
+      << j << " (expected " << closures << ")";
+  EXPECT_NE(good.output().find(std::to_string(closures) + " decisions (0 rejected) written to"),
+            std::string::npos)
+      << good.output();
+}
+
 TEST(LoopdListen, UntilBatchesEndsOnTheServersConvergedStatus) {
   const std::string url = uniqueUrl();
   // A long idle pause: the listener must wait for the idle optimize, however quiet it gets.
