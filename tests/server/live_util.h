@@ -152,6 +152,13 @@ inline int runTool(const std::vector<std::string>& args, const std::string& log,
   return p.wait(timeout);
 }
 
+/// The whole of a text file ("" if it cannot be read).
+inline std::string readText(const std::string& path) {
+  std::stringstream text;
+  text << std::ifstream(path).rdbuf();
+  return text.str();
+}
+
 /// id → values of every VERTEX line.
 inline std::map<long, std::vector<double>> readVertices(const std::string& path) {
   std::map<long, std::vector<double>> out;

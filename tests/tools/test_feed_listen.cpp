@@ -11,6 +11,7 @@
 
 #include "loopd/ambiguous_factor_t.hpp"
 #include "loopd/factor_batch_t.hpp"
+#include "solvers/io/dataset_reader.h"
 #include "tests/server/live_util.h"
 #include "tests/tools/feed_through_server.h"
 #include "tests/tools/landmark_world3d.h"
@@ -80,18 +81,13 @@ TEST(LoopdFeed, LogHasOneBatchPerPoseNumberedPerSender) {
 // those ties: chi2 5961.60 against 6184.12.)
 TEST(LoopdFeed, OtherRobotsSightingsNameTheFirstSightersLandmark) {
   const std::string vp = kData + "/victoria_park.txt";
-  auto read = [](const std::string& path) {
-    std::stringstream text;
-    text << std::ifstream(path).rdbuf();
-    return text.str();
-  };
   for (const bool interleave : {false, true}) {
     SCOPED_TRACE(interleave ? "--interleave" : "in turn");
     const std::string out = tmp("vp_feed.log"), log = tmp("vp2.lcmlog");
     std::vector<std::string> args = {kFeed, vp, "--robots", "2", "--log", log};
     if (interleave) args.push_back("--interleave");
     ASSERT_EQ(runTool(args, out), 0);
-    const std::string text = read(out);
+    const std::string text = readText(out);
     EXPECT_NE(text.find("loopd-feed: 66 landmarks (first: 5) are sighted by more than one robot: "
                         "their sightings go to the first robot's landmark"),
               std::string::npos)
@@ -126,9 +122,9 @@ TEST(LoopdFeed, OtherRobotsSightingsNameTheFirstSightersLandmark) {
   ASSERT_EQ(runTool({kFeed, vp, "--robots", "2", "--log", tmp("vp2.lcmlog"), "--quiet"},
                     tmp("vp_quiet.log")),
             0);
-  EXPECT_EQ(read(tmp("vp_quiet.log")), "");
+  EXPECT_EQ(readText(tmp("vp_quiet.log")), "");
   ASSERT_EQ(runTool({kFeed, vp, "--log", tmp("vp1.lcmlog")}, tmp("vp_alone.log")), 0);
-  const std::string alone = read(tmp("vp_alone.log"));
+  const std::string alone = readText(tmp("vp_alone.log"));
   EXPECT_EQ(alone.find("sighted by more than one robot"), std::string::npos) << alone;
 }
 
@@ -262,24 +258,13 @@ TEST(LoopdListen, WritesTheDecisionsOrSaysItCannot) {
       << full.output();
   srv.kill(SIGINT);
   EXPECT_EQ(srv.wait(20), 0);
-  std::stringstream text;
-  text << std::ifstream(stats).rdbuf();
-  const std::string j = text.str();
+  const std::string j = readText(stats);
   EXPECT_NE(j.find("\"solver\": \"isam2\""), std::string::npos) << j;
   EXPECT_NE(j.find("\"rejected\": []"), std::string::npos) << j;  // plain isam2 keeps all
-  // Every loop closure among intel's first 400 poses (114) has its decision (counted from the
-  // file).
+  // Every loop closure among intel's first 400 poses (114) has its decision.
   int closures = 0;
-  std::ifstream g(kData + "/intel.g2o");
-  std::string line;
-  while (std::getline(g, line)) {
-    std::istringstream in(line);
-    std::string tag;
-    long a = 0, b = 0;
-    if (in >> tag >> a >> b && tag.rfind("EDGE", 0) == 0 && a < 400 && b < 400 &&
-        std::labs(a - b) != 1)
-      ++closures;
-  }
+  for (const io::Edge& e : io::readDataset(kData + "/intel.g2o").edges)
+    closures += e.from < 400 && e.to < 400 && std::abs(e.from - e.to) != 1;
   ASSERT_GT(closures, 0);
   EXPECT_NE(j.find("\"uncertain_factors\": " + std::to_string(closures)), std::string::npos)
       << j << " (expected " << closures << ")";
@@ -420,11 +405,10 @@ TEST(LoopdFeed, ThreeRobotsIn3DJoinThroughLandmarksAndEndAtTheOptimum) {
   ASSERT_EQ(runTool({kSolve, world, "--solver", "lm", "--quiet", "--stats", stats},
                     tmp("world3d_solve.log")),
             0);
-  std::stringstream text;
-  text << std::ifstream(stats).rdbuf();
-  const size_t at = text.str().find("\"final_chi2\": ");
-  ASSERT_NE(at, std::string::npos) << text.str();
-  const double optimum = std::stod(text.str().substr(at + 14));
+  const std::string text = readText(stats);
+  const size_t at = text.find("\"final_chi2\": ");
+  ASSERT_NE(at, std::string::npos) << text;
+  const double optimum = std::stod(text.substr(at + 14));
   std::string said, log;
   feedThroughServer("world3d_est", world, 600,  // (its .g2o must not be the world's)
                     {"--robots", "3", "--interleave", "--landmark-owner", "1"}, said, log);

@@ -6,7 +6,6 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
-#include <sstream>
 #include <string>
 
 #include "tests/server/live_util.h"
@@ -16,12 +15,6 @@
 using namespace loopd::testing_live;
 
 namespace {
-
-std::string slurp(const std::string& path) {
-  std::stringstream s;
-  s << std::ifstream(path).rdbuf();
-  return s.str();
-}
 
 /// intel's outlier-free optimum (loopd-solve, once per process).
 const std::string& intelOptimum() {
@@ -34,7 +27,7 @@ const std::string& intelOptimum() {
 }
 
 struct Scores {
-  double precision = NAN, recall = NAN, inlierChi2 = NAN, referenceChi2 = NAN;
+  double precision = NAN, recall = NAN, inlierChi2 = NAN;
   long long poses = -1;
 };
 
@@ -66,8 +59,8 @@ Scores runThroughServer(const Case& c, std::string& said) {
                      "--json", eval, "--quiet"},
                     tmp(name + "_eval.log")),
             0)
-      << slurp(tmp(name + "_eval.log"));
-  const std::string j = slurp(eval);
+      << readText(tmp(name + "_eval.log"));
+  const std::string j = readText(eval);
   Scores s;
   s.precision = loopd::tools::jsonNumber(j, "precision", NAN);
   s.recall = loopd::tools::jsonNumber(j, "recall", NAN);
