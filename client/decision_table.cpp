@@ -42,6 +42,7 @@ void DecisionTable::clear() {
   table_.clear();
   assembling_.clear();
   assemblingSeq_ = -1;
+  lastListingRequest_ = -1;  // the table no longer holds that listing
 }
 
 }  // namespace loopd::client

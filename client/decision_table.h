@@ -36,7 +36,8 @@ class DecisionTable {
   void clear();
 
   const std::map<Name, Decision>& decisions() const { return table_; }
-  /// The request_id of the last complete listing (0: a listing nobody asked for, -1: none yet).
+  /// The request_id of the listing the table holds (0: one nobody asked for, -1: none since
+  /// the start or clear()).
   std::int64_t lastListingRequest() const { return lastListingRequest_; }
 
  private:

@@ -98,10 +98,11 @@ TEST(DecisionTable, AListingWithALostChunkIsDroppedNotTakenForTheWhole) {
 
 TEST(DecisionTable, ClearForgetsTheTableAndAnyListingBeingAssembled) {
   DecisionTable t;
-  t.apply(changes(1, {decision("a", 1, true)}));
+  t.apply(chunk(1, 0, 1, {decision("a", 1, true)}, 3));
   t.apply(chunk(2, 0, 2, {decision("a", 2, true)}));
   t.clear();
   EXPECT_TRUE(t.decisions().empty());
+  EXPECT_EQ(t.lastListingRequest(), -1);  // the listing of request 3 is gone with the table
   EXPECT_EQ(t.apply(chunk(2, 1, 2, {decision("a", 3, true)})), Applied::ListingBroken);
   EXPECT_TRUE(t.decisions().empty());
 }
