@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <ostream>
 #include <string>
 
 #include "tests/server/live_util.h"
@@ -35,6 +36,11 @@ struct Case {
   std::string variant, mode;
   int robots;
 };
+
+// Without it ctest lists each case's parameter as a byte dump.
+void PrintTo(const Case& c, std::ostream* os) {
+  *os << c.variant << ' ' << c.mode << ' ' << c.robots << " robot(s)";
+}
 
 /// intel + 30 wrong closures of `mode` (seed 42, groups of 5) through a server running
 /// `variant`, fed as `robots` robots (interleaved), scored by loopd-eval.
