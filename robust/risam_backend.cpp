@@ -205,8 +205,11 @@ UpdateResult RisamBackend::updateArrival(const BackendUpdate& u) {
     const bool isNew = graduated_.find(activeIds[a]) == graduated_.end();
     graduated_[activeIds[a]] = active[a];
     if (isNew)
-      for (int k = 0; k < active[a].original->size(); ++k)
-        byKey_[active[a].original->key(k)].push_back(activeIds[a]);
+      for (int k = 0; k < active[a].original->size(); ++k) {
+        const Key key = active[a].original->key(k);
+        byKey_[key].push_back(activeIds[a]);
+        framesJoined_ = framesJoined_ || keyKind(key) == KeyKind::Anchor;
+      }
   }
   if (!removing.empty())
     for (auto& [key, ids] : byKey_)

@@ -78,6 +78,7 @@ void RisamBackend::refreshGate() {
   // closures bend (RisamOptions::batchGateCheck).
   if (!tight_ && !tighter && !onlineGateChecked_) {
     onlineGateChecked_ = true;
+    confirmedGate_ = t.gate;
     if (options_.batchGateCheck && innerIsam2_ && adoptBatchGate()) return;
   }
   if (tight_ || tighter) {
@@ -85,8 +86,34 @@ void RisamBackend::refreshGate() {
     tail_ = t.tail;
     tight_ = true;
   } else if (wider && t.gate > gate_) {
+    if (rebaseFrameWidening(t.gate)) return;
     gate_ = t.gate;
   }
+}
+
+bool RisamBackend::rebaseFrameWidening(double reading) {
+  if (!options_.frameWideningCheck || !framesJoined_ || !innerIsam2_ ||
+      !(reading > options_.widenFactor * std::max(confirmedGate_, gate_)))
+    return false;
+  ++frameWideningChecks_;
+  const std::unique_ptr<GncBackend> gnc = solveBatchGnc();
+  const TailGate t = gnc ? batchTailGate(*gnc) : TailGate{};
+  if (!(t.gate > 0.0) || !(t.gate * options_.widenFactor < reading)) {
+    confirmedGate_ = reading;
+    return false;
+  }
+  confirmedGate_ = std::max(gate_, t.gate);
+  takeBatchSolution(gnc->estimate());
+  ++frameWideningsRebased_;
+  return true;
+}
+
+void RisamBackend::takeBatchSolution(const Values& x) {
+  innerIsam2_->resetEstimate(x);
+  const std::vector<FactorId> ids = graduatedIds();
+  inner_->update(regraduate(ids, 1.0));
+  inner_->optimize();
+  markFarOut(ids);
 }
 
 std::unique_ptr<GncBackend> RisamBackend::solveBatchGnc(
@@ -118,7 +145,6 @@ bool RisamBackend::adoptBatchGate(bool widenThisAnswer) {
   bool wider = false, tighter = false;
   gateDirection(t.gate, wider, tighter);
   if (!tighter && !(widenThisAnswer && wider && t.gate > gate_)) return false;
-  innerIsam2_->resetEstimate(x);
   if (tighter) {
     gate_ = t.gate;
     tail_ = t.tail;
@@ -128,10 +154,7 @@ bool RisamBackend::adoptBatchGate(bool widenThisAnswer) {
     if (onlineGate_ < 0.0) onlineGate_ = gate_, onlineTail_ = tail_;  // back at the next update
     gate_ = t.gate;
   }
-  const std::vector<FactorId> ids = graduatedIds();
-  inner_->update(regraduate(ids, 1.0));
-  inner_->optimize();
-  markFarOut(ids);
+  takeBatchSolution(x);
   ++batchGatesAdopted_;
   return true;
 }

@@ -104,6 +104,8 @@ TEST(RisamOnline, KeepsManhattansStiffClosuresAndGraduatesCheaply) {
   // too, and nothing is taken from it.
   EXPECT_EQ(b->batchGateChecks(), 1);
   EXPECT_EQ(b->batchGatesAdopted(), 0);
+  // One robot: no frames to join, so its widening gate is never checked again.
+  EXPECT_EQ(b->frameWideningChecks(), 0);
 }
 
 // `count` wrong closures as loopd-outliers adds them (`mode`, `seed`) to `dataset` (a
