@@ -2,6 +2,7 @@
 // numbers, ids, roles, robots), its determinism, and loopd-listen's files against a live server.
 #include <lcm/lcm-cpp.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -15,6 +16,7 @@
 #include "tests/server/live_util.h"
 #include "tests/tools/feed_through_server.h"
 #include "tests/tools/landmark_world3d.h"
+#include "tools/loopd-eval/json_input.h"
 
 using namespace loopd;
 using namespace loopd::testing_live;
@@ -428,8 +430,9 @@ TEST(LoopdFeed, AmbiguousIntelThroughTheServerMatchesLoopdSolve) {
   const std::string url = uniqueUrl();
   Proc srv = Proc::start({kLoopd, "--lcm-url", url, "--solver", "mh"}, tmp("srv.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(400));
-  const std::string est = tmp("amb_online.g2o");
-  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--until-quiet", quietFor(3)},
+  const std::string est = tmp("amb_online.g2o"), decisions = tmp("amb_decisions.json");
+  Proc listen = Proc::start({kListen, "--lcm-url", url, "--out", est, "--decisions", decisions,
+                             "--until-quiet", quietFor(3)},
                             tmp("listen.log"));
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   ASSERT_EQ(runTool({kFeed, graph, "--rate", "2000", "--lcm-url", url, "--quiet"}, tmp("feed.log")),
@@ -445,6 +448,23 @@ TEST(LoopdFeed, AmbiguousIntelThroughTheServerMatchesLoopdSolve) {
     worst = std::max({worst, std::abs(x[0] - b.at(id)[0]), std::abs(x[1] - b.at(id)[1])});
   }
   EXPECT_LT(worst, 1e-3) << "server and loopd-solve --solver mh disagree";
+  // The same choices, and loopd-listen's line counts what its file holds: it counted every
+  // ambiguous measurement among the decisions, and one that chose none among the rejected.
+  const std::string listened = readText(decisions);
+  const auto chosen = loopd::tools::jsonIntArray(readText(stats), "chosen");
+  ASSERT_EQ(chosen.size(), 15u);
+  EXPECT_EQ(loopd::tools::jsonIntArray(listened, "chosen"), chosen) << listened;
+  const long long plain =
+      static_cast<long long>(loopd::tools::jsonNumber(listened, "uncertain_factors", -1));
+  const std::string line = std::to_string(plain) + " decisions (" +
+                           std::to_string(loopd::tools::jsonIntArray(listened, "rejected").size()) +
+                           " rejected), 15 ambiguous (" +
+                           std::to_string(std::count(chosen.begin(), chosen.end(), -1)) +
+                           " chose none) written to";
+  EXPECT_NE(listen.output().find(line), std::string::npos)
+      << listen.output() << "\nwanted: " << line;
+  // intel's 785 closures, 15 of them made ambiguous.
+  EXPECT_EQ(plain, 770);
 }
 
 }  // namespace

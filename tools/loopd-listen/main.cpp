@@ -49,31 +49,43 @@ const char* kUsage =
     "                    [--covariances COV.txt] [--decisions STATS.json]\n"
     "                    [--until-quiet SECONDS] [--until-batches N] [--quiet]\n";
 
-// The decisions as loopd-solve's stats: rejected factor ids, and the chosen alternative of each
-// ambiguous measurement in id order (loopd-feed numbers them in file order).
-tools::JsonObject decisionStats(const client::DecisionTable& table, const loopd::status_t& st) {
+// The decisions as loopd-solve's stats count them: rejected factor ids, and the chosen
+// alternative of each ambiguous measurement in id order (loopd-feed numbers them in file order).
+struct DecisionSummary {
   std::vector<std::int64_t> rejected, chosen;
+  std::int64_t uncertain = 0;  // plain uncertain factors (ambiguous measurements apart)
+  std::int64_t noneChosen = 0;
+};
+
+DecisionSummary summarize(const client::DecisionTable& table) {
+  DecisionSummary out;
   std::map<std::int64_t, std::int64_t> chosenById;
-  std::int64_t uncertain = 0;
   for (const auto& [name, d] : table.decisions()) {
     if (d.ambiguous) {
       chosenById[name.second] = d.alternative;
       continue;
     }
-    ++uncertain;
-    if (!d.accepted) rejected.push_back(name.second);
+    ++out.uncertain;
+    if (!d.accepted) out.rejected.push_back(name.second);
   }
-  std::sort(rejected.begin(), rejected.end());
-  rejected.erase(std::unique(rejected.begin(), rejected.end()), rejected.end());
-  for (const auto& [id, alternative] : chosenById) chosen.push_back(alternative);
+  std::sort(out.rejected.begin(), out.rejected.end());
+  out.rejected.erase(std::unique(out.rejected.begin(), out.rejected.end()), out.rejected.end());
+  for (const auto& [id, alternative] : chosenById) {
+    out.chosen.push_back(alternative);
+    out.noneChosen += alternative < 0 ? 1 : 0;
+  }
+  return out;
+}
+
+tools::JsonObject decisionStats(const DecisionSummary& d, const loopd::status_t& st) {
   tools::JsonObject o;
   o.add("solver", st.solver)
       .add("update_seq", st.update_seq)
       .add("converged", st.converged != 0)
       .add("final_chi2", st.chi2)
-      .add("uncertain_factors", uncertain)
-      .add("rejected", rejected);
-  if (!chosenById.empty()) o.add("chosen", chosen);
+      .add("uncertain_factors", d.uncertain)
+      .add("rejected", d.rejected);
+  if (!d.chosen.empty()) o.add("chosen", d.chosen);
   return o;
 }
 
@@ -263,17 +275,22 @@ int main(int argc, char** argv) {
   }
   if (!decisionsOut.empty()) {
     // Stopped by a signal, the table is what the statuses so far said (no final listing).
+    const DecisionSummary summary = summarize(decisions);
     try {
-      decisionStats(decisions, sub.lastStatus()).writeFile(decisionsOut);
+      decisionStats(summary, sub.lastStatus()).writeFile(decisionsOut);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "loopd-listen: %s\n", e.what());
       return 1;
     }
     if (!quiet) {
-      long long rejected = 0;
-      for (const auto& [name, d] : decisions.decisions()) rejected += d.accepted ? 0 : 1;
-      std::fprintf(stderr, "loopd-listen: %zu decisions (%lld rejected) written to %s\n",
-                   decisions.decisions().size(), rejected, decisionsOut.c_str());
+      // The counts the file holds: an ambiguous measurement that chose none is not "rejected".
+      std::string ambiguous;
+      if (!summary.chosen.empty())
+        ambiguous = ", " + std::to_string(summary.chosen.size()) + " ambiguous (" +
+                    std::to_string(summary.noneChosen) + " chose none)";
+      std::fprintf(stderr, "loopd-listen: %lld decisions (%zu rejected)%s written to %s\n",
+                   static_cast<long long>(summary.uncertain), summary.rejected.size(),
+                   ambiguous.c_str(), decisionsOut.c_str());
     }
   }
   if (!quiet) {
