@@ -54,7 +54,6 @@ const char* kUsage =
 struct DecisionSummary {
   std::vector<std::int64_t> rejected, chosen;
   std::int64_t uncertain = 0;  // plain uncertain factors (ambiguous measurements apart)
-  std::int64_t noneChosen = 0;
 };
 
 DecisionSummary summarize(const client::DecisionTable& table) {
@@ -70,10 +69,7 @@ DecisionSummary summarize(const client::DecisionTable& table) {
   }
   std::sort(out.rejected.begin(), out.rejected.end());
   out.rejected.erase(std::unique(out.rejected.begin(), out.rejected.end()), out.rejected.end());
-  for (const auto& [id, alternative] : chosenById) {
-    out.chosen.push_back(alternative);
-    out.noneChosen += alternative < 0 ? 1 : 0;
-  }
+  for (const auto& [id, alternative] : chosenById) out.chosen.push_back(alternative);
   return out;
 }
 
@@ -287,7 +283,8 @@ int main(int argc, char** argv) {
       std::string ambiguous;
       if (!summary.chosen.empty())
         ambiguous = ", " + std::to_string(summary.chosen.size()) + " ambiguous (" +
-                    std::to_string(summary.noneChosen) + " chose none)";
+                    std::to_string(std::count(summary.chosen.begin(), summary.chosen.end(), -1)) +
+                    " chose none)";
       std::fprintf(stderr, "loopd-listen: %lld decisions (%zu rejected)%s written to %s\n",
                    static_cast<long long>(summary.uncertain), summary.rejected.size(),
                    ambiguous.c_str(), decisionsOut.c_str());
