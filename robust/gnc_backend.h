@@ -158,6 +158,7 @@ class GncBackend : public BatchBackend {
   void optimize() override;
   std::vector<std::pair<FactorId, double>> decisions() const override;
   std::vector<FactorId> rejected() const override;
+  bool judgesUncertain() const override { return true; }
 
   int outerIterations() const { return outer_; }
   double finalMu() const { return mu_; }

@@ -43,6 +43,12 @@ bool PerFactorRobustBackend::handlesHere(const Factor& f) const {
   return v == "none" || wrapSpecFor(v, 0.0).has_value();
 }
 
+bool PerFactorRobustBackend::mayDownWeight(const Factor& f) const {
+  if (!isUncertain(f.role())) return false;
+  if (handlesHere(f)) return f.robustRequest().variant != "none";
+  return inner_->judgesUncertain();
+}
+
 UpdateResult PerFactorRobustBackend::update(const BackendUpdate& u) {
   BackendUpdate inner;
   inner.initial = u.initial;

@@ -55,6 +55,10 @@ class PerFactorRobustBackend : public DecoratorBackend {
 
   /// True if this layer handles f itself (a kernel, sc, mm or "none" request).
   bool handlesHere(const Factor& f) const;
+  bool judgesUncertain() const override { return inner_->judgesUncertain(); }
+  /// True if f may be down-weighted or rejected: an uncertain factor under a kernel, sc or mm
+  /// request, or under the solver's handling when the solver judgesUncertain().
+  bool mayDownWeight(const Factor& f) const;
 
   /// Switch variables of this layer: index ≥ 2³⁹, so they never meet the solver's own; their
   /// priors' ids have bit 62 set (the solver's own internal factors use bit 63).

@@ -262,6 +262,7 @@ class RisamBackend : public DecoratorBackend {
   void optimize() override;
   std::vector<std::pair<FactorId, double>> decisions() const override;
   std::vector<FactorId> rejected() const override;
+  bool judgesUncertain() const override { return true; }
 
   /// Inner updates run by the last update() (1 + schedule steps when it graduated factors).
   int lastInnerUpdates() const { return lastInnerUpdates_; }

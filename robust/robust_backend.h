@@ -31,6 +31,7 @@ class RobustBackend : public DecoratorBackend {
   UpdateResult update(const BackendUpdate& update) override;
   std::vector<std::pair<FactorId, double>> decisions() const override;
   std::vector<FactorId> rejected() const override;
+  bool judgesUncertain() const override { return true; }
 
   const Backend& inner() const { return *inner_; }
   /// The switch variable of an original factor (Switchable only), or 0.

@@ -441,8 +441,9 @@ std::vector<Issue> FactorBatchValidator::checkContext(const B& b, const GraphVie
                          " joins robots " + std::to_string(r) + " and " + std::to_string(s) +
                          ", whose frames no certain factor has joined yet: an ambiguous "
                          "alternative cannot be the first link between two robots' frames; "
-                         "send a certain inter-robot loop closure, or sightings of enough of "
-                         "the other robot's landmarks (factor_t), first"});
+                         "send a certain inter-robot loop closure (under a robust solver: "
+                         "robust \"none\", or --join-agreement closures that agree), or "
+                         "sightings of enough of the other robot's landmarks (factor_t), first"});
       break;  // one issue per group
     }
   for (const auto& v : b.initial_values) {

@@ -135,13 +135,14 @@ std::map<std::uint32_t, std::uint32_t> Engine::frameGroups(const loopd::factor_b
   // From the certain inter-robot factors themselves (not robots_' parents, which regroup()
   // updates only after a round), so the answer depends on the order of batches alone, not on
   // how they were coalesced into rounds: a journal replay decides exactly as the live run.
-  // The batch's own sightings are not counted (whether they join is decided when staged).
+  // The batch's own sightings are not counted (whether they join is decided when staged), nor
+  // its closures that would be kept back until enough agree (engine_closures.cpp).
   std::map<FactorId, InterEdge> edges = currentInterEdges(nullptr);
   for (std::int64_t rid : b.remove_ids)
     if (const auto fid = sessions_.liveId(b.sender, rid)) edges.erase(*fid);
   std::vector<std::pair<std::uint32_t, std::uint32_t>> joins;
   for (const auto& f : b.factors)
-    if (isInterRobot(f))
+    if (isInterRobot(f) && joinsAtOnce(f))
       joins.emplace_back(static_cast<std::uint32_t>(f.keys[0].robot),
                          static_cast<std::uint32_t>(f.keys[1].robot));
   return frameGroupsOf(edges, ownerTiesAt(nullptr), joins);

@@ -30,6 +30,14 @@
 // of its own: the first robot to sight one of its landmarks adopts it (adopted_), and from
 // then on its landmarks are that robot's for every rule above (landmarkFrame).
 //
+// Under a solver that judges loop closures (Backend::judgesUncertain, or a closure's own kernel,
+// sc or mm request), an inter-robot loop closure between robots whose frames are not joined yet
+// is kept back as well (pendingClosures_, engine_closures.cpp): it alone would fix the
+// transform between the frames, and a wrong one bends both maps from then on. A pair's kept-back
+// closures join the frames once EngineOptions::joinAgreement of them agree on that transform
+// (closure_agreement.h); all of them then go in, judged by the solver like any other. Another
+// factor joining the frames first releases them the same way.
+//
 // An ambiguous alternative never creates an anchor (under "none" or another alternative it
 // would be unconstrained, and each alternative implies another anchor value): an inter-robot
 // alternative is accepted only between robots already joined by certain inter-robot factors
@@ -79,6 +87,12 @@ struct EngineOptions {
   // Robot ids that name landmark namespaces (--landmark-namespace): landmarks only, no poses;
   // the first robot to sight one of a namespace's landmarks holds them all in its frame.
   std::set<std::uint32_t> landmarkNamespaces;
+  // Under a solver that judges loop closures, two robots' frames join once this many of their
+  // inter-robot loop closures agree on the transform between them (PCM's pairwise test at
+  // p = joinProbability); until then those closures are kept back. 1: the first one joins them,
+  // right or wrong. Closures sent with robust "none" are trusted and join at once.
+  int joinAgreement = 2;
+  double joinProbability = 0.999;
 };
 
 struct Inbound {
@@ -151,9 +165,10 @@ class Engine : private GraphView {
     std::int64_t id = 0;
     AmbiguousFactor factor;
   };
-  /// A cross-robot sighting kept out of the solver until its robots' frames are joined.
-  struct PendingSighting {
-    FactorPtr factor;  // single-frame form (keys x_r, l_s), its FactorId set
+  /// A cross-robot sighting or inter-robot loop closure kept out of the solver until its robots'
+  /// frames are joined.
+  struct KeptBack {
+    FactorPtr factor;  // single-frame form (keys x_r, l_s or x_s), its FactorId set
     Owner owner;
   };
   using RobotPair = std::pair<std::uint32_t, std::uint32_t>;  // lower robot first
@@ -171,7 +186,8 @@ class Engine : private GraphView {
     std::vector<Owner> owners;  // parallel to update.factors (sender id −1: server-owned)
     std::vector<Group> groups;  // parallel to update.ambiguous
     std::vector<FactorId> groupRemovals;  // internal ids of ambiguous groups removed
-    std::map<RobotPair, std::vector<PendingSighting>> pendingBefore;
+    std::map<RobotPair, std::vector<KeptBack>> pendingBefore;
+    std::map<RobotPair, std::vector<KeptBack>> closuresBefore;
     std::map<std::uint32_t, std::uint32_t> adoptedBefore;
   };
   struct Held {
@@ -245,8 +261,25 @@ class Engine : private GraphView {
   /// batch's own, from adoptionsOf).
   bool isCrossFrameSighting(const loopd::factor_t& f,
                             const std::map<std::uint32_t, std::uint32_t>& adoptions) const;
-  /// Removes a kept-back sighting; false if `id` is not one.
-  bool dropPendingSighting(FactorId id);
+  /// Inter-robot loop closures under a solver that judges them (engine_closures.cpp): true if
+  /// `f` (built, its robust request set) is to be kept back, its robots' frames not joined.
+  bool keepsBack(const Factor& f) const;
+  /// Whether an inter-robot closure joins its robots' frames as soon as it is staged (it is
+  /// trusted, or the solver does not judge closures), whatever the frames are now.
+  bool joinsAtOnce(const Factor& f) const;
+  bool joinsAtOnce(const loopd::factor_t& wf) const;
+  /// Both robots anchored in one group (sharing the common frame).
+  bool shareFrame(std::uint32_t r, std::uint32_t s) const;
+  /// Keeps the batch's such closures back; joins a pair's frames once enough of its closures
+  /// agree, and releases (anchored) the closures of every pair whose frames are now joined.
+  void stageInterRobotClosures(const std::vector<KeptBack>& closures, Staged& st);
+  /// Releases the kept-back closures of every pair whose frames are joined now.
+  void releaseJoinedClosures(Staged& st);
+  /// The pose of s's frame in r's that between factor `z` (x_r → x_s) implies at the current
+  /// (or staged) values: M = x_r·Z·x_s⁻¹.
+  void frameOffset(const Factor& z, SE2& m2, SE3& m3) const;
+  /// Removes a kept-back sighting or closure; false if `id` is not one.
+  bool dropKeptBack(FactorId id);
   /// The inter-robot edges of the graph with the staged rounds (and `building`) applied.
   std::map<FactorId, InterEdge> currentInterEdges(const Staged* building) const;
   /// Which landmarks their owners tie to their own frames (ownerTiedLandmark), with the staged
@@ -309,8 +342,9 @@ class Engine : private GraphView {
   std::int64_t loopClosures_ = 0;
   std::map<FactorId, InterEdge> interEdges_;  // anchored factors
   std::map<Key, int> ownerTies_;  // landmark → live factors of its owner's that tie it there
-  std::map<std::uint32_t, std::uint32_t> adopted_;  // landmark namespace → its frame's robot
-  std::map<RobotPair, std::vector<PendingSighting>> pending_;  // sightings waiting for a join
+  std::map<std::uint32_t, std::uint32_t> adopted_;      // landmark namespace → its frame's robot
+  std::map<RobotPair, std::vector<KeptBack>> pending_;  // sightings waiting for a join
+  std::map<RobotPair, std::vector<KeptBack>> pendingClosures_;  // closures waiting for agreement
   bool regroupNeeded_ = false;
 
   std::vector<Staged> staged_;

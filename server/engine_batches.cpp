@@ -219,6 +219,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   st.d = d;
   st.robotsBefore = robots_;
   st.pendingBefore = pending_;
+  st.closuresBefore = pendingClosures_;
   st.adoptedBefore = adopted_;
   for (const auto& [ns, r] : adoptions) {
     adopted_.emplace(ns, r);
@@ -263,32 +264,31 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     it->second.latestIndex =
         std::max<std::int64_t>(it->second.latestIndex, static_cast<std::int64_t>(keyIndex(k)));
   }
-  // The batch's factors.
-  Values batchValues = knownVals;  // known ∪ guess, for anchor initialisation
-  for (int s = 0; s < guess.size(); ++s) batchValues.insertFrom(guess, s);
+  // The batch's factors (the batch's guesses are staged: holder() finds them).
   std::vector<std::pair<FactorPtr, Owner>> sightings;  // cross-robot ones
+  std::vector<KeptBack> keptClosures;                  // inter-robot ones, frames not joined
   for (size_t i = 0; i < b.factors.size(); ++i) {
     const W& wf = b.factors[i];
-    FactorPtr f = built[i];
-    if (isInterRobot(wf)) {
-      const Key xr = toKey(wf.keys[0]), xs = toKey(wf.keys[1]);
-      SE2 m2;
-      SE3 m3;
-      if (const auto* z = dynamic_cast<const BetweenFactorSE2*>(built[i].get()))
-        m2 = se2Of(batchValues, xr) * z->measured() * se2Of(batchValues, xs).inverse();
-      else
-        m3 = se3Of(batchValues, xr) * static_cast<const BetweenFactorSE3&>(*built[i]).measured() *
-             se3Of(batchValues, xs).inverse();
-      joinRobots(keyRobot(xr), keyRobot(xs), m2, m3, st);
-      f = anchoredFactor(*built[i]);
-    }
+    std::shared_ptr<Factor> f = built[i];
+    // An inter-robot factor is an anchored loop closure: uncertain whatever its role.
+    const bool uncertain = isInterRobot(wf) || isUncertain(f->role());
     const FactorId id = newFactorId();
-    std::const_pointer_cast<Factor>(f)->setId(id);
-    if (isUncertain(f->role()))
-      std::const_pointer_cast<Factor>(f)->setRobustRequest({wf.robust, wf.robust_param});
+    f->setId(id);
+    if (uncertain) f->setRobustRequest({wf.robust, wf.robust_param});
     sessions_.addId(b.sender, wf.id, id);
     st.addedIds.emplace_back(wf.id, id);
-    const Owner owner{b.sender, wf.id, isUncertain(f->role())};
+    const Owner owner{b.sender, wf.id, uncertain};
+    if (isInterRobot(wf)) {
+      if (keepsBack(*f)) {
+        keptClosures.push_back({f, owner});
+        continue;
+      }
+      SE2 m2;
+      SE3 m3;
+      frameOffset(*f, m2, m3);
+      joinRobots(keyRobot(f->key(0)), keyRobot(f->key(1)), m2, m3, st);
+      f = anchoredFactor(*f);
+    }
     if (isCrossFrameSighting(wf, {})) {
       sightings.emplace_back(f, owner);
       continue;
@@ -296,8 +296,10 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     u.factors.push_back(f);
     st.owners.push_back(owner);
   }
+  stageInterRobotClosures(keptClosures, st);
   stageSightings(sightings, st);
   mergeGroupsJoinedByLandmarks(st);
+  releaseJoinedClosures(st);  // sightings or landmarks may have joined a pair's frames
   // Ambiguous groups: each alternative is built like a factor_t and gets an internal id of
   // its own; the group's internal id is what the sender's id maps to. An inter-robot
   // alternative goes through the anchors of its robots, which certain inter-robot factors
@@ -328,7 +330,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
     const FactorId fid = sessions_.removeId(b.sender, rid);
     if (isGroupId(fid))
       st.groupRemovals.push_back(fid);
-    else if (!dropPendingSighting(fid))
+    else if (!dropKeptBack(fid))
       u.removals.push_back(fid);
     st.removedIds.emplace_back(rid, fid);
   }
@@ -402,6 +404,7 @@ void Engine::undo(Staged& s) {
   for (const auto& [id, fid] : s.addedIds) sessions_.undoAdd(sender, id);
   robots_ = s.robotsBefore;
   pending_ = s.pendingBefore;
+  pendingClosures_ = s.closuresBefore;
   adopted_ = s.adoptedBefore;
 }
 

@@ -119,6 +119,7 @@ void Engine::resetAll() {
   ownerTies_.clear();
   adopted_.clear();
   pending_.clear();
+  pendingClosures_.clear();
   staged_.clear();
   stagedValues_ = Values();
   holds_.clear();

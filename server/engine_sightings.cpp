@@ -38,7 +38,7 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
   std::map<RobotPair, Key> firstKeptBack;  // pairs with nothing kept back before this batch
   for (const auto& [f, owner] : sightings) {
     const RobotPair pair = std::minmax(keyRobot(f->key(0)), frameOf(f->key(1)));
-    std::vector<PendingSighting>& list = pending_[pair];
+    std::vector<KeptBack>& list = pending_[pair];
     if (list.empty()) firstKeptBack.emplace(pair, f->key(1));
     list.push_back({f, owner});
   }
@@ -77,11 +77,11 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       // anchored)? Only landmarks fixed in their owner's group count: one nobody has placed,
       // or only other robots sight, cannot align the frames.
       std::map<FactorId, InterEdge> edges = current;
-      auto counts = [&](const PendingSighting& p) {
+      auto counts = [&](const KeptBack& p) {
         const Key l = p.factor->key(1);
         return known(l) && (ties(l) || sightedInGroup.count(l));
       };
-      for (const PendingSighting& p : it->second)
+      for (const KeptBack& p : it->second)
         if (counts(p))
           edges[p.factor->id()] = interEdgeOf(p.factor->key(0), p.factor->key(1),
                                               p.factor->varType(1), frameOf(p.factor->key(1)));
@@ -94,7 +94,7 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       const bool se3 = robots_.at(a).poseType == VarType::SE3;
       std::vector<PointPair2> pairs2;
       std::vector<PointPair3> pairs3;
-      for (const PendingSighting& p : it->second) {
+      for (const KeptBack& p : it->second) {
         if (!counts(p)) continue;
         const Factor& f = *p.factor;
         const auto [pv, ps] = valueSlot(f.key(0));
@@ -132,7 +132,7 @@ void Engine::stageSightings(const std::vector<std::pair<FactorPtr, Owner>>& sigh
       joinRobots(a, b, m2, m3, st);
     }
     const bool joined = groupOf(groups, a) != groupOf(groups, b);
-    for (const PendingSighting& p : it->second) {
+    for (const KeptBack& p : it->second) {
       placeSightedLandmark(*p.factor, st);
       st.update.factors.push_back(anchoredFactor(*p.factor, frameOf(p.factor->key(1))));
       st.owners.push_back(p.owner);
@@ -217,16 +217,17 @@ void Engine::placeSightedLandmark(const Factor& f, Staged& st) {
   spdlog::debug("robot {} introduces {} (its owner has not sighted it yet)", r, keyToString(l));
 }
 
-bool Engine::dropPendingSighting(FactorId id) {
-  for (auto it = pending_.begin(); it != pending_.end(); ++it) {
-    auto& list = it->second;
-    const auto at = std::find_if(list.begin(), list.end(),
-                                 [&](const PendingSighting& p) { return p.factor->id() == id; });
-    if (at == list.end()) continue;
-    list.erase(at);
-    if (list.empty()) pending_.erase(it);
-    return true;
-  }
+bool Engine::dropKeptBack(FactorId id) {
+  for (auto* kept : {&pending_, &pendingClosures_})
+    for (auto it = kept->begin(); it != kept->end(); ++it) {
+      auto& list = it->second;
+      const auto at = std::find_if(list.begin(), list.end(),
+                                   [&](const KeptBack& p) { return p.factor->id() == id; });
+      if (at == list.end()) continue;
+      list.erase(at);
+      if (list.empty()) kept->erase(it);
+      return true;
+    }
   return false;
 }
 

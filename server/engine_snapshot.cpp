@@ -195,12 +195,16 @@ void Engine::writeSnapshot(const std::string& path) const {
   if (skippedGroups > 0)
     notes += (notes.empty() ? "" : ", ") + std::to_string(skippedGroups) +
              " ambiguous groups with bearing-range alternatives";
-  size_t keptBack = 0;
+  size_t keptBack = 0, keptClosures = 0;
   for (const auto& [pair, list] : pending_) keptBack += list.size();
-  const std::string keptNote =
+  for (const auto& [pair, list] : pendingClosures_) keptClosures += list.size();
+  std::string keptNote =
       keptBack == 0 ? ""
                     : std::to_string(keptBack) +
                           " cross-robot sightings, kept back until their robots share a frame";
+  if (keptClosures > 0)
+    keptNote += (keptNote.empty() ? "" : ", ") + std::to_string(keptClosures) +
+                " inter-robot loop closures, kept back until enough agree";
   io::writeG2oGraph(path, ds);
   appendText(path, "# loopd snapshot: " + std::to_string(ds.poses.size()) + " poses, " +
                        std::to_string(ds.landmarks.size()) + " landmarks, " +

@@ -57,6 +57,7 @@ int runServer(const ServerConfig& cfg, const std::atomic<bool>& stop) {
   eo.idleSeconds = cfg.idleSeconds;
   eo.maxHypotheses = cfg.maxHypotheses;
   eo.posesPerUpdate = cfg.posesPerUpdate;
+  eo.joinAgreement = cfg.joinAgreement;
   eo.landmarkNamespaces = cfg.landmarkNamespaces;
   if (!cfg.journal.empty() && !resumeIntoJournal) {
     journal = std::make_unique<Journal>(cfg.journal, exists(cfg.journal));

@@ -26,14 +26,15 @@ std::string trim(const std::string& s) {
 }
 
 const char* const kKeys[] = {
-    "lcm-url",        "solver",           "channel-prefix",     "journal",  "resume",
-    "publish-every",  "log-level",        "hold-seconds",       "hold-max", "idle-seconds",
-    "max-hypotheses", "poses-per-update", "landmark-namespace", "config"};
+    "lcm-url",        "solver",           "channel-prefix",     "journal",        "resume",
+    "publish-every",  "log-level",        "hold-seconds",       "hold-max",       "idle-seconds",
+    "max-hypotheses", "poses-per-update", "landmark-namespace", "join-agreement", "config"};
 
 // The ranges of the numeric flags (serverUsage() and README name them).
 constexpr int kMaxCount = 1000000;       // --publish-every, --hold-max, --poses-per-update
 constexpr double kMaxSeconds = 86400.0;  // --hold-seconds, --idle-seconds: a day
 constexpr int kMaxHypotheses = 1000;     // --max-hypotheses (as loopd-solve's)
+constexpr int kMaxAgreement = 1000;      // --join-agreement
 
 bool knownKey(const std::string& k) {
   for (const char* x : kKeys)
@@ -100,6 +101,8 @@ void apply(ServerConfig& c, const std::string& k, const std::string& v) {
     c.maxHypotheses = toInt(k, v, 1, kMaxHypotheses);
   else if (k == "poses-per-update")
     c.posesPerUpdate = toInt(k, v, 0, kMaxCount);
+  else if (k == "join-agreement")
+    c.joinAgreement = toInt(k, v, 1, kMaxAgreement);
   else if (k == "landmark-namespace") {
     // A comma-separated list of robot ids (key_t.robot is an int32 ≥ 0).
     c.landmarkNamespaces.clear();
@@ -209,6 +212,9 @@ std::string serverUsage() {
          "  --landmark-namespace N[,M...]  robot ids that hold landmarks only (a shared tag map):\n"
          "                        poses there are refused; a namespace's landmarks live in the\n"
          "                        frame of the first robot to sight one (default none)\n"
+         "  --join-agreement N    under a solver that judges loop closures, two robots' frames\n"
+         "                        join once N of their inter-robot closures agree, 1-1000\n"
+         "                        (default 2; 1 = the first closure joins them)\n"
          "  --log-level L         trace|debug|info|warn|error|critical|off (default info)\n"
          "  --config FILE         `key = value` lines with the names above; flags override\n"
          "  --help                this text\n";

@@ -21,6 +21,7 @@ struct ServerConfig {
   double idleSeconds = 0.5;
   int maxHypotheses = 10;                      // mh: live hypotheses at most (K)
   int posesPerUpdate = 100;                    // EngineOptions::posesPerUpdate
+  int joinAgreement = 2;                       // EngineOptions::joinAgreement
   std::set<std::uint32_t> landmarkNamespaces;  // EngineOptions::landmarkNamespaces
   bool help = false;
 };

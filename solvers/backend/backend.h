@@ -106,6 +106,8 @@ class Backend {
   virtual std::vector<std::pair<FactorId, double>> decisions() const { return {}; }
   /// Ids of factors judged outliers.
   virtual std::vector<FactorId> rejected() const { return {}; }
+  /// True for variants that may down-weight or reject uncertain factors (the robust ones).
+  virtual bool judgesUncertain() const { return false; }
 
   /// True for variants that keep alternatives apart (mh); others flatten them.
   virtual bool handlesAmbiguous() const { return false; }

@@ -1,7 +1,8 @@
 // Rounds (server/engine.cpp, Engine::step): batches that queued while the engine solved are
 // applied together, at most EngineOptions::posesPerUpdate new poses of one robot per update.
 // And queued replays under robust solvers: Victoria Park in two interleaved robots under
-// risam, manhattan with grouped wrong closures under gnc-tls and, as two robots, under risam.
+// risam, manhattan with grouped wrong closures under gnc-tls and, as two robots, under risam,
+// and intel with random wrong closures as two robots under mm.
 #include <gtest/gtest.h>
 
 #include <vector>
@@ -32,12 +33,14 @@ struct Replay {
 // A dataset's batches (one per pose, as loopd-feed sends them) queued before the engine
 // looks: a log replayed at full speed into a busy server. Then the input pause's optimize.
 Replay queuedAtOnce(const io::Dataset& ds, int posesPerUpdate, const std::string& solver,
-                    int robots = 1, bool interleave = false) {
+                    int robots = 1, bool interleave = false,
+                    int joinAgreement = server::EngineOptions{}.joinAgreement) {
   const tools::FeedOrder feed(ds, -1, robots, interleave);
   std::vector<std::vector<const io::Edge*>> due(feed.poses().size());
   for (const io::Edge& e : ds.edges) due.at(static_cast<size_t>(feed.dueAt(e))).push_back(&e);
   server::EngineOptions o = EngineHarness::options(solver);
   o.posesPerUpdate = posesPerUpdate;
+  o.joinAgreement = joinAgreement;
   o.idleSeconds = 0.0;
   EngineHarness h(o, nullptr);
   client::FactorPublisher pub(
@@ -59,6 +62,17 @@ Replay queuedAtOnce(const io::Dataset& ds, int posesPerUpdate, const std::string
     if (const auto* risam = dynamic_cast<const RisamBackend*>(&robust->solver()))
       r.frameWideningsRebased = risam->frameWideningsRebased();
   return r;
+}
+
+// `clean` with `count` wrong closures appended (loopd-outliers' protocol, groups of 10).
+io::Dataset withWrongClosures(const io::Dataset& clean, int count, tools::OutlierMode mode,
+                              std::uint64_t seed) {
+  tools::OutlierOptions o;
+  o.count = count;
+  o.mode = mode;
+  o.groupSize = 10;
+  o.seed = seed;
+  return tools::addOutliers(clean, o).graph;
 }
 
 Replay queuedVictoriaPark(int posesPerUpdate, const std::string& solver = "isam2", int robots = 1,
@@ -97,12 +111,8 @@ TEST(EngineRounds, VictoriaParkInTwoInterleavedRobotsUnderRisamEndsAsOneRobot) {
 // the graph without them.
 TEST(EngineRounds, GncTlsOnTheServerRejectsGroupedWrongClosuresAndReachesTheOptimum) {
   const io::Dataset clean = test::loadPrefix("manhattan.g2o:1500");
-  tools::OutlierOptions o;
-  o.count = 50;
-  o.mode = tools::OutlierMode::Group;
-  o.groupSize = 10;
-  o.seed = 1;
-  const Replay r = queuedAtOnce(tools::addOutliers(clean, o).graph, 100, "gnc-tls");
+  const Replay r =
+      queuedAtOnce(withWrongClosures(clean, 50, tools::OutlierMode::Group, 1), 100, "gnc-tls");
   const Replay optimum = queuedAtOnce(clean, 100, "lm");
   EXPECT_EQ(r.rejected.size(), 50u);
   EXPECT_LT(test::largestPositionGap(r.estimate, optimum.estimate), 1e-3);  // metres
@@ -116,16 +126,29 @@ TEST(EngineRounds, GncTlsOnTheServerRejectsGroupedWrongClosuresAndReachesTheOpti
 // (RisamOptions::frameWideningCheck), whose solution reads ~16 again and is taken.
 TEST(EngineRounds, RisamInTwoRobotsKeepsItsGateWhereWrongJoinsBendTheMaps) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/manhattan.g2o");
-  tools::OutlierOptions o;
-  o.count = 300;
-  o.mode = tools::OutlierMode::Group;
-  o.groupSize = 10;
-  o.seed = 1;
-  const Replay r = queuedAtOnce(tools::addOutliers(clean, o).graph, 100, "risam", 2, true);
+  const Replay r = queuedAtOnce(withWrongClosures(clean, 300, tools::OutlierMode::Group, 1), 100,
+                                "risam", 2, true);
   const Replay optimum = queuedAtOnce(clean, 100, "lm", 2, true);
   EXPECT_EQ(r.rejected.size(), 300u);
   EXPECT_LT(test::largestPositionGap(r.estimate, optimum.estimate), 1e-3);  // metres
   EXPECT_GE(r.frameWideningsRebased, 1);
+}
+
+// mm, fed intel + 100 random wrong closures (seed 1) as two interleaved robots: the first
+// inter-robot closures in feed order are wrong ones, and the first joined the robots' frames
+// (--join-agreement 1, as before): mm then rejected the true inter-robot closures that
+// disagreed with it, 204 rejected, 14 m off the optimum (one robot: exact). Now the frames
+// join once two closures agree, and the replay ends exact.
+TEST(EngineRounds, MmInTwoRobotsJoinsTheFramesWhereClosuresAgree) {
+  const io::Dataset clean = io::readDataset(testing_live::kData + "/intel.g2o");
+  const io::Dataset noisy = withWrongClosures(clean, 100, tools::OutlierMode::Random, 1);
+  const Replay optimum = queuedAtOnce(clean, 100, "lm", 2, true);
+  const Replay r = queuedAtOnce(noisy, 100, "mm", 2, true);
+  EXPECT_EQ(r.rejected.size(), 100u);
+  EXPECT_LT(test::largestPositionGap(r.estimate, optimum.estimate), 1e-3);  // metres
+  const Replay firstJoins = queuedAtOnce(noisy, 100, "mm", 2, true, 1);
+  EXPECT_GT(firstJoins.rejected.size(), 150u);
+  EXPECT_GT(test::largestPositionGap(firstJoins.estimate, optimum.estimate), 1.0);
 }
 
 }  // namespace

@@ -878,6 +878,12 @@ TEST(ServerConfig, FlagsFileAndDefaults) {
   EXPECT_EQ(parseServerConfig({"--poses-per-update", "25"}).posesPerUpdate, 25);
   EXPECT_THROW(parseServerConfig({"--poses-per-update", "-1"}), std::invalid_argument);
   EXPECT_THROW(parseServerConfig({"--poses-per-update", "2.5"}), std::invalid_argument);
+  // Frames join once two inter-robot closures agree unless told (1: the first joins them).
+  EXPECT_EQ(parseServerConfig({}).joinAgreement, 2);
+  EXPECT_EQ(parseServerConfig({"--join-agreement", "1"}).joinAgreement, 1);
+  EXPECT_EQ(parseServerConfig({"--join-agreement", "5"}).joinAgreement, 5);
+  for (const char* bad : {"0", "-1", "1001", "2.5"})
+    EXPECT_THROW(parseServerConfig({"--join-agreement", bad}), std::invalid_argument) << bad;
   // Landmark namespaces: a comma-separated list of robot ids.
   EXPECT_TRUE(parseServerConfig({}).landmarkNamespaces.empty());
   EXPECT_EQ(parseServerConfig({"--landmark-namespace", "100"}).landmarkNamespaces,

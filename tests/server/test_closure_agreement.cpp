@@ -1,0 +1,99 @@
+// Which of a robot pair's inter-robot loop closures agree on the transform between the robots'
+// frames (server/closure_agreement.h): two robots walk the same square, each in its own frame;
+// the closures between them at the same spots agree, in either direction, and wrong ones do not.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "server/closure_agreement.h"
+#include "solvers/factors/between_factor_se2.h"
+#include "tests/robust/square_walk.h"
+
+namespace loopd::server {
+namespace {
+
+using square::kLap;
+using square::walk;
+
+const Eigen::Matrix3d kInfo = Eigen::Vector3d(100, 100, 10000).asDiagonal();  // σ 0.1 m, 0.01 rad
+
+struct TwoRobots {
+  std::vector<FactorPtr> odometry;
+  Values poses;  // the odometry composed, each robot in its own frame
+  std::mt19937 rng{3};
+  std::normal_distribution<double> gauss{0.0, 1.0};
+  SE2 noisy(const SE2& z) {
+    return z * SE2(0.02 * gauss(rng), 0.02 * gauss(rng), 0.002 * gauss(rng));
+  }
+  // Robot 1 walks the square's second lap, from its own origin (the world's T1 = its start).
+  TwoRobots() {
+    for (std::uint32_t r = 0; r < 2; ++r) {
+      SE2 x = r == 0 ? SE2() : SE2(3, 4, 0.7);  // either frame will do: only cycles matter
+      for (int i = 0; i < kLap; ++i) {
+        poses.insert(poseKey(static_cast<std::uint64_t>(i), r), x);
+        if (i + 1 == kLap) break;
+        const SE2 z = noisy(walk(i).between(walk(i + 1)));
+        odometry.push_back(std::make_shared<BetweenFactorSE2>(
+            poseKey(static_cast<std::uint64_t>(i), r),
+            poseKey(static_cast<std::uint64_t>(i + 1), r), z, kInfo, FactorRole::Odometry));
+        x = x * z;
+      }
+    }
+  }
+  // Robot 0's pose i to robot 1's pose j, measured as the truth is (or `off` it).
+  FactorPtr closure(int i, int j, const SE2& off = SE2()) {
+    return std::make_shared<BetweenFactorSE2>(
+        poseKey(static_cast<std::uint64_t>(i), 0), poseKey(static_cast<std::uint64_t>(j), 1),
+        noisy(walk(i).between(walk(j))) * off, kInfo, FactorRole::LoopClosure);
+  }
+  FactorPtr reversed(int i, int j) {  // sent by robot 1: its pose j to robot 0's pose i
+    return std::make_shared<BetweenFactorSE2>(
+        poseKey(static_cast<std::uint64_t>(j), 1), poseKey(static_cast<std::uint64_t>(i), 0),
+        noisy(walk(j).between(walk(i))), kInfo, FactorRole::LoopClosure);
+  }
+};
+
+TEST(ClosureAgreement, TheTrueClosuresAgreeInEitherDirectionAndWrongOnesDoNot) {
+  TwoRobots t;
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<FactorPtr> closures;
+  std::vector<size_t> expected;
+  for (int i = 0; i < 12; ++i) {
+    if (i % 3 == 0) {  // true: the same spot of the square, one of them sent the other way
+      expected.push_back(closures.size());
+      closures.push_back(i == 6 ? t.reversed(5 + i, 5 + i) : t.closure(5 + i, 5 + i));
+    } else {  // wrong: 2–4 m and 0.5–1 rad off the truth
+      const double a = 2 * M_PI * u(t.rng), d = 2 + 2 * u(t.rng);
+      closures.push_back(t.closure(static_cast<int>(u(t.rng) * kLap),
+                                   static_cast<int>(u(t.rng) * kLap),
+                                   SE2(d * std::cos(a), d * std::sin(a),
+                                       (u(t.rng) < 0.5 ? -1 : 1) * (0.5 + 0.5 * u(t.rng)))));
+    }
+  }
+  EXPECT_EQ(agreeingClosures(closures, t.odometry, t.poses, 0.999), expected);
+}
+
+TEST(ClosureAgreement, OneClosureOrOnlyWrongOnesAgreeOnNothing) {
+  TwoRobots t;
+  EXPECT_LE(agreeingClosures({t.closure(3, 3)}, t.odometry, t.poses, 0.999).size(), 1u);
+  const std::vector<FactorPtr> wrong = {t.closure(3, 20, SE2(3, 0, 0.6)),
+                                        t.closure(12, 7, SE2(-2, 2, -0.8)),
+                                        t.closure(30, 31, SE2(0, -3, 1.0))};
+  EXPECT_LE(agreeingClosures(wrong, t.odometry, t.poses, 0.999).size(), 1u);
+}
+
+TEST(ClosureAgreement, ClosuresAcrossAGapInARobotsOdometryAreNotJudged) {
+  TwoRobots t;
+  // Robot 1's odometry from pose 10 to 11 missing: its poses 5 and 15 are on different chains.
+  std::vector<FactorPtr> odometry;
+  for (const FactorPtr& f : t.odometry)
+    if (!(keyRobot(f->key(0)) == 1 && keyIndex(f->key(0)) == 10)) odometry.push_back(f);
+  EXPECT_LE(agreeingClosures({t.closure(5, 5), t.closure(15, 15)}, odometry, t.poses, 0.999).size(),
+            1u);
+  EXPECT_EQ(
+      agreeingClosures({t.closure(5, 5), t.closure(15, 15)}, t.odometry, t.poses, 0.999).size(),
+      2u);
+}
+
+}  // namespace
+}  // namespace loopd::server
