@@ -145,6 +145,7 @@ void GncBackend::Run::tryConsistentStart() {
   ConsistencyOptions pcm;
   pcm.probability = gnc_.consistencyProbability;
   pcm.checkpoint = b_.interruptCheckpoint();
+  pcm.unjudgedPairsAgree = true;  // each robot's own closures, with several robots
   std::vector<double> qOdometry, qClosures;
   for (int i = 0; i < n_; ++i) {
     const double q = (cbar_[i] > 0.0 ? r2_[i] : graph_[i]->chi2(estimate_)) / half_[i];

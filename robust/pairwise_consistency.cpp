@@ -209,7 +209,7 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values&
   // computing every statistic, with the same sets (robust/README, thirty-fourth session).
   auto consistent = [&](int i, int j, double threshold) {
     Cycle c;
-    if (!cycleOf(i, j, c)) return false;
+    if (!cycleOf(i, j, c)) return options.unjudgedPairsAgree;
     const double t = translationTerm(c);
     if (!(t < threshold)) return false;
     const double sine = rotationSine(c.delta.R);

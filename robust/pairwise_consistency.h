@@ -10,8 +10,9 @@
 // set a greedy clique search finds (seeded from the best-connected closures). Wrong
 // closures agree with the odometry only by chance, true ones all agree with each other.
 //
-// Only pose–pose between closures whose four ends lie on one unbroken odometry chain are
-// judged; the rest (landmarks, closures across robots or chain breaks) are left out.
+// Only pose–pose between closures are judged, and a pair only where each side's two ends lie
+// on one unbroken odometry chain (ConsistencyOptions::unjudgedPairsAgree says what the other
+// pairs count as); landmarks and anchored closures are left out.
 #include <functional>
 #include <vector>
 
@@ -27,6 +28,11 @@ struct ConsistencyOptions {
   double odometryScale = 1.0;
   double closureScale = 1.0;
   int cliqueSeeds = 8;  // greedy clique searches, each from one of the best-connected closures
+  /// Pairs the test cannot judge (their ends on other chains: two robots' own closures, or
+  /// either side of a break in the odometry) count as consistent: the set is then the union of
+  /// the largest sets of each pair of chains, as a start wants (the GNC's consistent start:
+  /// with two robots it took one robot's closures alone). False: such pairs do not agree.
+  bool unjudgedPairsAgree = false;
   /// Calibrate the covariances on short cycles: pairs whose two chains are each at most this
   /// many poses long (0: off); used when there are at least minCalibrationPairs of them.
   int calibrationWindow = 5;

@@ -230,5 +230,40 @@ TEST(PairwiseConsistency, LeavesOutAClosureNothingAgreesWith) {
   EXPECT_EQ(set.size, static_cast<int>(s.trueClosures.size()));
 }
 
+// A break in the odometry (as between two robots' chains) leaves pairs across it unjudged:
+// without unjudgedPairsAgree the set holds the closures of one side alone; with it, the true
+// closures of both, and a wrong one inside a side still stays out.
+TEST(PairwiseConsistency, UnjudgedPairsAgreeOnlyWhenAsked) {
+  WalkSetup setup;
+  setup.wrong = 0;
+  Scenario s = square(setup);
+  const int breakAt = 2 * kLap + kLap / 2;  // in lap 3: its closures fall on both sides
+  FactorGraph cut;
+  std::vector<int> index(static_cast<size_t>(s.graph.size()), -1);
+  for (int i = 0; i < s.graph.size(); ++i) {
+    const Factor& f = *s.graph[i];
+    if (f.role() == FactorRole::Odometry &&
+        keyIndex(f.key(1)) == static_cast<std::uint64_t>(breakAt))
+      continue;
+    index[static_cast<size_t>(i)] = cut.size();
+    cut.add(s.graph[i]);
+  }
+  const int wrong = cut.size();
+  cut.add(std::make_shared<BetweenFactorSE2>(poseKey(5), poseKey(30), SE2(3, -2, 0.8),
+                                             Eigen::Vector3d(100.0, 100.0, 1e4).asDiagonal(),
+                                             FactorRole::LoopClosure));
+  const int trueCount = static_cast<int>(s.trueClosures.size());
+  const ConsistentSet strict = pairwiseConsistentClosures(cut, s.odometry);
+  EXPECT_GT(strict.size, 0);
+  EXPECT_LT(strict.size, trueCount);
+  ConsistencyOptions o;
+  o.unjudgedPairsAgree = true;
+  const ConsistentSet both = pairwiseConsistentClosures(cut, s.odometry, o);
+  EXPECT_EQ(both.size, trueCount);
+  for (int i : s.trueClosures)
+    EXPECT_TRUE(both.member[static_cast<size_t>(index[static_cast<size_t>(i)])]) << i;
+  EXPECT_FALSE(both.member[static_cast<size_t>(wrong)]);
+}
+
 }  // namespace
 }  // namespace loopd
