@@ -270,8 +270,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
   for (size_t i = 0; i < b.factors.size(); ++i) {
     const W& wf = b.factors[i];
     std::shared_ptr<Factor> f = built[i];
-    // An inter-robot factor is an anchored loop closure: uncertain whatever its role.
-    const bool uncertain = isInterRobot(wf) || isUncertain(f->role());
+    const bool uncertain = isUncertain(f->role());  // inter-robot ones: loop closures (validator)
     const FactorId id = newFactorId();
     f->setId(id);
     if (uncertain) f->setRobustRequest({wf.robust, wf.robust_param});
