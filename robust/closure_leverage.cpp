@@ -104,8 +104,13 @@ std::vector<std::vector<int>> closureClusters(const FactorGraph& graph, const Va
   std::vector<std::vector<int>> clusters;
   for (int m = 0; m < static_cast<int>(factors.size()); ++m) {
     const Factor& f = *graph[factors[m]];
-    const int a = f.size() == 2 ? values.slot(f.key(0)) : -1;
-    const int b = f.size() == 2 ? values.slot(f.key(1)) : -1;
+    int a = -1, b = -1;
+    if (f.size() == 2) {
+      a = values.slot(f.key(0)), b = values.slot(f.key(1));
+    } else if (f.size() == 4 && keyKind(f.key(0)) == KeyKind::Anchor &&
+               keyKind(f.key(2)) == KeyKind::Anchor) {
+      a = values.slot(f.key(1)), b = values.slot(f.key(3));  // a closure between robots
+    }
     if (a < 0 || b < 0)
       clusters.push_back({factors[m]});
     else

@@ -31,10 +31,11 @@ std::vector<double> predictedCostChange(const FactorGraph& graph, const Values& 
                                         const std::vector<std::vector<int>>& groups,
                                         GroupChange change, const JointMarginalsFn& marginals);
 
-/// Clusters of the given factors: two-variable factors whose ends, as variable slots of
-/// values (ordered low to high end), are both within `window` slots of another member's
-/// (a run of closures between the same two stretches of trajectory, or a group of wrong
-/// ones). Other factors are clusters of their own.
+/// Clusters of the given factors: two-variable factors (and inter-robot ones through anchors,
+/// (A_r, x_r, A_s, y_s), by x_r and y_s) whose ends, as variable slots of values (ordered low
+/// to high end), are both within `window` slots of another member's (a run of closures
+/// between the same two stretches of trajectory, or a group of wrong ones). Other factors are
+/// clusters of their own.
 std::vector<std::vector<int>> closureClusters(const FactorGraph& graph, const Values& values,
                                               const std::vector<int>& factors, int window);
 

@@ -6,10 +6,12 @@
 #include <limits>
 #include <numeric>
 #include <unordered_map>
+#include <utility>
 
 #include "robust/robust_factors.h"
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
+#include "solvers/init/common_frame.h"
 
 namespace loopd {
 namespace {
@@ -76,8 +78,15 @@ std::vector<int> greedyClique(const std::vector<std::uint64_t>& adjacency, size_
 
 }  // namespace
 
-ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values& odometry,
+ConsistentSet pairwiseConsistentClosures(const FactorGraph& given, const Values& ownFrames,
                                          const ConsistencyOptions& options) {
+  // Several robots: every pose in the common frame, inter-robot closures as plain ones
+  // (factor for factor, so the indices stay the graph's).
+  const bool severalFrames = holdsSeveralFrames(ownFrames);
+  const FactorGraph plain = severalFrames ? withAnchoredBetweensPlain(given) : FactorGraph();
+  const Values common = severalFrames ? inCommonFrame(ownFrames) : Values();
+  const FactorGraph& graph = severalFrames ? plain : given;
+  const Values& odometry = severalFrames ? common : ownFrames;
   ConsistentSet out;
   out.member.assign(graph.size(), 0);
 
@@ -144,6 +153,14 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values&
     sumRpp[k] = sumRpp[s] + stepR[s] * p.squaredNorm();
     segment[k] = segment[s] + (hasStep[s] ? 0 : 1);
   }
+  // A closure between two chains is judged from the lower chain to the higher, as its inverse
+  // if need be (the same variances: the test is isotropic in each block), so that two closures
+  // between the same chains pair their ends: robots' closures come in either direction.
+  for (Judged& c : judged)
+    if (segment[c.a] > segment[c.b]) {
+      std::swap(c.a, c.b);
+      std::swap(c.z, c.zInverse);
+    }
   // The chain between poses u and v: translation variance at point q, rotation variance.
   auto chain = [&](int u, int v, const Vec3& q, double& varT, double& varR) {
     const int lo = std::min(u, v), hi = std::max(u, v);

@@ -12,7 +12,10 @@
 //
 // Only pose–pose between closures are judged, and a pair only where each side's two ends lie
 // on one unbroken odometry chain (ConsistencyOptions::unjudgedPairsAgree says what the other
-// pairs count as); landmarks and anchored closures are left out.
+// pairs count as); landmarks are left out. With several robots the poses are taken in the
+// common frame and inter-robot closures through anchors (AnchoredBetweenFactor) as plain ones
+// (solvers/init/common_frame.h); chains follow key order, robot by robot, joined where trusted
+// between factors join them, and a closure between two chains is judged from the lower one.
 #include <functional>
 #include <vector>
 
@@ -51,7 +54,7 @@ struct ConsistentSet {
 };
 
 /// The largest mutually consistent set of the graph's loop closures at `odometry` (the
-/// trusted factors' estimate: the odometry composed).
+/// trusted factors' estimate: the odometry composed; each robot's in its own frame).
 ConsistentSet pairwiseConsistentClosures(const FactorGraph& graph, const Values& odometry,
                                          const ConsistencyOptions& options = {});
 

@@ -1,6 +1,6 @@
 #include "server/anchored_sighting_factor.h"
 
-#include "server/anchored_between_factor.h"
+#include "solvers/factors/anchored_between_factor.h"
 
 namespace loopd::server {
 

@@ -21,7 +21,7 @@ namespace loopd::server {
 /// other, in either direction, on single-frame keys) of the largest mutually consistent set
 /// found, at `poses` (both robots' poses, each in its own frame); `odometry` (their odometry
 /// factors) says which poses lie on one unbroken chain: closures across a break are not
-/// judged. A closure from the higher robot to the lower is judged as its inverse, with the
+/// judged. A closure from the higher robot to the lower is judged (by PCM) as its inverse, with the
 /// same information (the test is isotropic in each block, see PCM's header).
 std::vector<size_t> agreeingClosures(const std::vector<FactorPtr>& closures,
                                      const std::vector<FactorPtr>& odometry, const Values& poses,

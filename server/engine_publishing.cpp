@@ -13,9 +13,9 @@
 #include "loopd/status_t.hpp"
 #include "robust/ambiguous_choice.h"
 #include "robust/mh_backend.h"
-#include "server/anchored_between_factor.h"
 #include "server/wire.h"
 #include "server/wire_factors.h"
+#include "solvers/factors/anchored_between_factor.h"
 
 namespace loopd::server {
 

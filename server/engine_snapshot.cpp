@@ -8,9 +8,9 @@
 #include <cstdio>
 #include <map>
 
-#include "server/anchored_between_factor.h"
 #include "server/anchored_sighting_factor.h"
 #include "server/engine.h"
+#include "solvers/factors/anchored_between_factor.h"
 #include "solvers/factors/landmark_factors.h"
 #include "solvers/io/estimate_writer.h"
 

@@ -2,9 +2,9 @@
 
 #include <stdexcept>
 
-#include "server/anchored_between_factor.h"
 #include "server/anchored_sighting_factor.h"
 #include "server/wire.h"
+#include "solvers/factors/anchored_between_factor.h"
 #include "solvers/factors/landmark_factors.h"
 #include "solvers/factors/prior_factors.h"
 

@@ -2,12 +2,14 @@
 
 #include <cmath>
 #include <deque>
+#include <map>
 #include <stdexcept>
 
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
 #include "solvers/factors/landmark_factors.h"
 #include "solvers/init/breadth_first.h"
+#include "solvers/init/common_frame.h"
 #include "solvers/init/landmark_headings.h"
 #include "solvers/init/sparse_normal_solve.h"
 
@@ -270,7 +272,23 @@ Values initializeLinearFromLowestPose(const FactorGraph& graph, const Values& gu
     if (keyKind(guess.key(s)) == KeyKind::Pose && (!found || guess.key(s) < anchor))
       anchor = guess.key(s), found = true;
   if (!found || graph.empty()) return Values();
-  return initializeLinear(graph, guess, anchor);
+  if (!holdsSeveralFrames(guess)) return initializeLinear(graph, guess, anchor);
+
+  // Each robot's lowest pose, in key order: the roots of the solves.
+  const std::map<std::uint32_t, int> lowest = lowestPoseOfEachRobot(guess);
+  const FactorGraph plain = withAnchoredBetweensPlain(graph);
+  Values common = inCommonFrame(guess);
+  std::vector<char> reached(static_cast<size_t>(guess.size()), 0);
+  for (const auto& [robot, root] : lowest) {
+    if (reached[static_cast<size_t>(root)]) continue;
+    common = initializeLinear(plain, common, guess.key(root));
+    const ReachableUnknowns r = numberReachable(
+        plain, common, root, [](const Factor&) { return true; }, [](int) { return 1; });
+    reached[static_cast<size_t>(root)] = 1;
+    for (size_t s = 0; s < r.index.size(); ++s)
+      if (r.index[s] >= 0) reached[s] = 1;
+  }
+  return inOwnFrames(common, guess);
 }
 
 }  // namespace loopd

@@ -21,7 +21,10 @@ Values initializeChordal3D(const FactorGraph& graph, const Values& guess, Key an
 Values initializeLinear(const FactorGraph& graph, const Values& guess, Key anchor);
 
 /// initializeLinear anchored at guess's lowest pose key; empty if guess has no pose or the
-/// graph no factor.
+/// graph no factor. With several robots (solvers/init/common_frame.h), solved in the common
+/// frame with the anchored between factors as plain ones, and each robot whose lowest pose
+/// that leaves unreached starts another solve there (kept where the guess puts it): so every
+/// robot's poses come from its own odometry, however the robots are joined.
 Values initializeLinearFromLowestPose(const FactorGraph& graph, const Values& guess);
 
 }  // namespace loopd

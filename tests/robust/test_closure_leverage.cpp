@@ -1,6 +1,6 @@
 // What adding or removing closures would do, predicted from the joint marginal without a
 // re-solve, against actually re-solving (a two-lap square walk, a cluster of three closures
-// measured off by 0.3 m); and the clustering of closures by their ends.
+// measured off by 0.3 m); and the clustering of closures by their ends, between robots too.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,6 +10,7 @@
 
 #include "robust/closure_leverage.h"
 #include "solvers/batch/batch_backend.h"
+#include "solvers/factors/anchored_between_factor.h"
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/prior_factors.h"
 #include "tests/robust/square_walk.h"
@@ -136,6 +137,31 @@ TEST(ClosureLeverage, ClustersJoinClosuresWithNearbyEnds) {
   for (auto& c : clusters) std::sort(c.begin(), c.end());
   std::sort(clusters.begin(), clusters.end());
   const std::vector<std::vector<int>> expected = {{0, 1, 2}, {3}, {4}, {5}};
+  EXPECT_EQ(clusters, expected);
+}
+
+// Closures between two robots, through their anchors (A_r, x_r, A_s, y_s), cluster by their
+// poses like any other (they were clusters of their own, so a group of wrong ones between the
+// robots was never dropped together).
+TEST(ClosureLeverage, ClustersClosuresBetweenRobotsByTheirPoses) {
+  FactorGraph graph;
+  Values values;
+  for (std::uint32_t robot = 0; robot < 2; ++robot)
+    for (int i = 0; i < 200; ++i) values.insert(poseKey(i, robot), SE2());
+  const Key a0 = makeKey(0, KeyKind::Anchor, 0), a1 = makeKey(1, KeyKind::Anchor, 0);
+  values.insert(a0, SE2());
+  values.insert(a1, SE2());
+  auto across = [&](Key ar, Key x, Key as, Key y) {
+    graph.add(std::make_shared<AnchoredBetweenFactorSE2>(
+        ar, x, as, y, SE2(), Eigen::Matrix3d::Identity(), FactorRole::LoopClosure));
+  };
+  across(a0, poseKey(10, 0), a1, poseKey(50, 1));
+  across(a1, poseKey(52, 1), a0, poseKey(12, 0));  // sent from the other robot
+  across(a0, poseKey(100, 0), a1, poseKey(50, 1));
+  auto clusters = closureClusters(graph, values, {0, 1, 2}, 5);
+  for (auto& c : clusters) std::sort(c.begin(), c.end());
+  std::sort(clusters.begin(), clusters.end());
+  const std::vector<std::vector<int>> expected = {{0, 1}, {2}};
   EXPECT_EQ(clusters, expected);
 }
 

@@ -1,7 +1,8 @@
 // The pairwise-consistency (PCM) selection: on a noisy trajectory that circles a square three
 // times, the true revisits form one mutually consistent set and wrong closures do not join
 // it, in 2D and 3D; the scales and the short-cycle calibration set the test's width; a pair
-// is judged exactly at the gate; a closure nothing agrees with stays out.
+// is judged exactly at the gate; a closure nothing agrees with stays out; closures between two
+// robots, through their anchors and in either direction, are judged as one robot's.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -15,6 +16,7 @@
 #include "solvers/factors/between_factor_se3.h"
 #include "solvers/geometry/so3.h"
 #include "tests/robust/square_walk.h"
+#include "tests/solvers/init/two_robot_split.h"
 
 namespace loopd {
 namespace {
@@ -263,6 +265,53 @@ TEST(PairwiseConsistency, UnjudgedPairsAgreeOnlyWhenAsked) {
   for (int i : s.trueClosures)
     EXPECT_TRUE(both.member[static_cast<size_t>(index[static_cast<size_t>(i)])]) << i;
   EXPECT_FALSE(both.member[static_cast<size_t>(wrong)]);
+}
+
+// The walk's third lap as a second robot (anchored, in its own frame): every true closure is
+// now between the robots, through their anchors. With the odometry step across the split
+// (trusted, anchored too) the set is the one-robot walk's. Anchored closures were not judged
+// before, so none of them was in the set.
+TEST(PairwiseConsistency, JudgesClosuresBetweenRobotsThroughTheirAnchors) {
+  const Scenario s = square(WalkSetup{});
+  const ConsistentSet one = pairwiseConsistentClosures(s.graph, s.odometry);
+  const std::uint64_t at = 2 * kLap;
+  const test::TwoRobotSplit split =
+      test::splitInTwo(s.graph, s.odometry, at, s.odometry.se2(s.odometry.slot(poseKey(at))));
+  ASSERT_EQ(split.graph.size(), s.graph.size());
+  const ConsistentSet two = pairwiseConsistentClosures(split.graph, split.values);
+  EXPECT_EQ(two.judged, one.judged);
+  EXPECT_EQ(two.size, one.size);
+  for (int i : s.trueClosures) EXPECT_TRUE(two.member[static_cast<size_t>(i)]) << i;
+  EXPECT_EQ(wrongIn(s, two), 0);
+}
+
+// Two robots' chains with nothing trusted between them, and their closures sent from either
+// robot (every other one from robot 1, as the inverse measurement): the closures between the
+// same two chains still pair up, so the true ones make the set.
+TEST(PairwiseConsistency, PairsClosuresBetweenRobotsWhicheverWayTheyPoint) {
+  const Scenario s = square(WalkSetup{});
+  const std::uint64_t at = 2 * kLap;
+  const test::TwoRobotSplit split =
+      test::splitInTwo(s.graph, s.odometry, at, s.odometry.se2(s.odometry.slot(poseKey(at))));
+  FactorGraph apart;
+  std::vector<int> index(static_cast<size_t>(split.graph.size()), -1);
+  bool flip = false;
+  for (int i = 0; i < split.graph.size(); ++i) {
+    const FactorPtr& f = split.graph[i];
+    const auto* a = dynamic_cast<const AnchoredBetweenFactorSE2*>(f.get());
+    if (a && f->role() == FactorRole::Odometry) continue;  // the step across the split
+    index[static_cast<size_t>(i)] = apart.size();
+    if (a && (flip = !flip))
+      apart.add(std::make_shared<AnchoredBetweenFactorSE2>(f->key(2), f->key(3), f->key(0),
+                                                           f->key(1), a->measured().inverse(),
+                                                           a->information(), f->role()));
+    else
+      apart.add(f);
+  }
+  const ConsistentSet set = pairwiseConsistentClosures(apart, split.values);
+  EXPECT_EQ(set.size, static_cast<int>(s.trueClosures.size()));
+  for (int i : s.trueClosures)
+    EXPECT_TRUE(set.member[static_cast<size_t>(index[static_cast<size_t>(i)])]) << i;
 }
 
 }  // namespace

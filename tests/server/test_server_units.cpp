@@ -19,7 +19,6 @@
 #include "loopd/status_t.hpp"
 #include "robust/backend_registry.h"
 #include "robust/decorator_backend.h"
-#include "server/anchored_between_factor.h"
 #include "server/batch_validator.h"
 #include "server/engine.h"
 #include "server/server_config.h"
@@ -179,106 +178,6 @@ TEST(SessionTable, IdsAreNeverReused) {
   EXPECT_TRUE(t.idLive("a", 10));
   t.undoAdd("a", 10);
   EXPECT_FALSE(t.idUsed("a", 10));
-}
-
-// --- anchored factors ---------------------------------------------------------------------
-
-template <class FactorT>
-void checkJacobians(const FactorT& f, Values& v, double tol) {
-  const int d = f.dim();
-  std::vector<const double*> x(4);
-  for (int i = 0; i < 4; ++i) x[static_cast<size_t>(i)] = v.data(v.slot(f.key(i)));
-  std::vector<double> r0(static_cast<size_t>(d));
-  std::array<JacobianBlock, 4> J{};
-  double* Jp[4] = {J[0].data(), J[1].data(), J[2].data(), J[3].data()};
-  f.evaluate(x.data(), r0.data(), Jp);
-  const double h = 1e-6;
-  for (int k = 0; k < 4; ++k) {
-    const int s = v.slot(f.key(k));
-    const int n = varDim(v.type(s));
-    for (int c = 0; c < n; ++c) {
-      Values vp = v, vm = v;
-      std::vector<double> dp(static_cast<size_t>(n), 0.0), dm(static_cast<size_t>(n), 0.0);
-      dp[static_cast<size_t>(c)] = h;
-      dm[static_cast<size_t>(c)] = -h;
-      vp.retract(s, dp.data());
-      vm.retract(s, dm.data());
-      std::vector<const double*> xp(4), xm(4);
-      for (int i = 0; i < 4; ++i) {
-        xp[static_cast<size_t>(i)] = vp.data(vp.slot(f.key(i)));
-        xm[static_cast<size_t>(i)] = vm.data(vm.slot(f.key(i)));
-      }
-      std::vector<double> rp(static_cast<size_t>(d)), rm(static_cast<size_t>(d));
-      f.evaluate(xp.data(), rp.data(), nullptr);
-      f.evaluate(xm.data(), rm.data(), nullptr);
-      for (int row = 0; row < d; ++row) {
-        const double num = (rp[static_cast<size_t>(row)] - rm[static_cast<size_t>(row)]) / (2 * h);
-        const double ana = J[static_cast<size_t>(k)][static_cast<size_t>(c * d + row)];
-        EXPECT_NEAR(ana, num, tol * std::max(1.0, std::abs(num)))
-            << "key " << k << " col " << c << " row " << row;
-      }
-    }
-  }
-}
-
-TEST(AnchoredBetweenFactor, SE2JacobiansMatchNumerical) {
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<double> u(-2, 2);
-  for (int trial = 0; trial < 20; ++trial) {
-    Values v;
-    const Key ar = makeKey(0, KeyKind::Anchor, 0), xr = poseKey(5, 0),
-              as = makeKey(1, KeyKind::Anchor, 0), xs = poseKey(9, 1);
-    v.insert(ar, SE2(u(rng), u(rng), u(rng)));
-    v.insert(xr, SE2(u(rng), u(rng), u(rng)));
-    v.insert(as, SE2(u(rng), u(rng), u(rng)));
-    v.insert(xs, SE2(u(rng), u(rng), u(rng)));
-    Eigen::Matrix3d info;
-    info << 40, 3, 1, 3, 20, 2, 1, 2, 90;
-    AnchoredBetweenFactorSE2 f(ar, xr, as, xs, SE2(u(rng), u(rng), u(rng)), info);
-    checkJacobians(f, v, 1e-5);
-  }
-}
-
-TEST(AnchoredBetweenFactor, SE3JacobiansMatchNumerical) {
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-1, 1);
-  auto rnd = [&] {
-    Vec6 xi;
-    for (int i = 0; i < 6; ++i) xi[i] = u(rng);
-    return expSE3(xi);
-  };
-  for (int trial = 0; trial < 20; ++trial) {
-    Values v;
-    const Key ar = makeKey(0, KeyKind::Anchor, 0), xr = poseKey(5, 0),
-              as = makeKey(1, KeyKind::Anchor, 0), xs = poseKey(9, 1);
-    v.insert(ar, rnd());
-    v.insert(xr, rnd());
-    v.insert(as, rnd());
-    v.insert(xs, rnd());
-    Mat6 info = Mat6::Identity() * 10;
-    info(0, 1) = info(1, 0) = 2;
-    info(3, 5) = info(5, 3) = 1;
-    AnchoredBetweenFactorSE3 f(ar, xr, as, xs, rnd(), info);
-    checkJacobians(f, v, 1e-5);
-  }
-}
-
-TEST(AnchoredBetweenFactor, EqualsPlainBetweenOfCommonFramePoses) {
-  const SE2 Ar(1, 2, 0.3), xr(0.5, -1, 0.2), As(-3, 1, -1), xs(2, 2, 0.7), Z(0.4, 0.1, -0.2);
-  Eigen::Matrix3d info = Eigen::Matrix3d::Identity() * 5;
-  Values v;
-  const Key ar = makeKey(0, KeyKind::Anchor, 0), pr = poseKey(1, 0),
-            as = makeKey(1, KeyKind::Anchor, 0), ps = poseKey(1, 1);
-  v.insert(ar, Ar);
-  v.insert(pr, xr);
-  v.insert(as, As);
-  v.insert(ps, xs);
-  AnchoredBetweenFactorSE2 f(ar, pr, as, ps, Z, info);
-  Values w;
-  w.insert(poseKey(0), Ar * xr);
-  w.insert(poseKey(1), As * xs);
-  BetweenFactorSE2 g(poseKey(0), poseKey(1), Z, info);
-  EXPECT_NEAR(f.chi2(v), g.chi2(w), 1e-9);
 }
 
 // --- engine -------------------------------------------------------------------------------

@@ -8,8 +8,8 @@
 #include <stdexcept>
 
 #include "client/factor_publisher.h"
-#include "server/anchored_between_factor.h"
 #include "server/wire.h"
+#include "solvers/factors/anchored_between_factor.h"
 #include "solvers/factors/between_factor_se2.h"
 
 using namespace loopd;

@@ -8,7 +8,7 @@
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
 
-namespace loopd::server {
+namespace loopd {
 
 class AnchoredBetweenFactorSE2 final : public Factor {
  public:
@@ -42,4 +42,4 @@ class AnchoredBetweenFactorSE3 final : public Factor {
 /// Ad of an SE(2) pose on tangent vectors (δx, δy, δθ).
 Eigen::Matrix3d adjointSE2(const SE2& X);
 
-}  // namespace loopd::server
+}  // namespace loopd

@@ -1,6 +1,6 @@
-#include "server/anchored_between_factor.h"
+#include "solvers/factors/anchored_between_factor.h"
 
-namespace loopd::server {
+namespace loopd {
 
 namespace {
 // Evaluates inner (a between factor of dimension D) at the common-frame poses p = A_r·x_r,
@@ -105,4 +105,4 @@ std::unique_ptr<Factor> AnchoredBetweenFactorSE3::clone() const {
   return std::make_unique<AnchoredBetweenFactorSE3>(*this);
 }
 
-}  // namespace loopd::server
+}  // namespace loopd
