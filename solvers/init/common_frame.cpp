@@ -1,6 +1,5 @@
 #include "solvers/init/common_frame.h"
 
-#include <iterator>
 #include <memory>
 
 #include "solvers/factors/anchored_between_factor.h"
@@ -103,20 +102,20 @@ FactorGraph withAnchoredBetweensPlain(const FactorGraph& graph) {
 
 Values inOwnFrames(const Values& common, const Values& ownFrames) {
   Values out = common;
-  // Each anchored robot's lowest pose: where its own frame is pinned.
-  std::map<std::uint32_t, int> lowest = lowestPoseOfEachRobot(ownFrames);
-  for (auto it = lowest.begin(); it != lowest.end();)
-    it = anchorSlot(ownFrames, it->first) < 0 ? lowest.erase(it) : std::next(it);
-  for (const auto& [robot, s] : lowest) {
-    const int a = out.slot(frameAnchorKey(robot));
+  // Each anchored robot's lowest pose: where its own frame is pinned. A robot with an anchor
+  // but no pose (landmarks only) keeps its anchor.
+  for (const auto& [robot, s] : lowestPoseOfEachRobot(ownFrames)) {
+    const int a = anchorSlot(out, robot);
+    if (a < 0) continue;
     if (ownFrames.type(s) == VarType::SE3)
       out.set(a, common.se3(s) * ownFrames.se3(s).inverse());
     else
       out.set(a, common.se2(s) * ownFrames.se2(s).inverse());
   }
   for (int s = 0; s < out.size(); ++s) {
-    if (!movesWithFrame(out.key(s)) || !lowest.count(keyRobot(out.key(s)))) continue;
-    moveByFrame(out, s, out, out.slot(frameAnchorKey(keyRobot(out.key(s)))), true);
+    if (!movesWithFrame(out.key(s))) continue;
+    const int a = anchorSlot(out, keyRobot(out.key(s)));
+    if (a >= 0) moveByFrame(out, s, out, a, true);
   }
   return out;
 }

@@ -32,8 +32,9 @@ Values inCommonFrame(const Values& values);
 FactorGraph withAnchoredBetweensPlain(const FactorGraph& graph);
 
 /// Back from the common frame: each robot with an anchor in `ownFrames` (the values the common
-/// ones came from) keeps its lowest pose where `ownFrames` has it, its anchor takes what places
-/// that pose at its common-frame value, and its other variables follow into that frame.
+/// ones came from, slot for slot) keeps its lowest pose where `ownFrames` has it, its anchor
+/// takes what places that pose at its common-frame value, and its other variables follow into
+/// that frame (a robot without poses keeps its anchor).
 Values inOwnFrames(const Values& common, const Values& ownFrames);
 
 }  // namespace loopd

@@ -66,5 +66,19 @@ TEST(CommonFrame, AnchoredBetweensBecomePlainOnes) {
   EXPECT_GT(anchored, 0);  // the split's odometry step at least
 }
 
+// A robot with an anchor but no pose (a landmark namespace) keeps its anchor, and its
+// landmarks come back to where they were.
+TEST(CommonFrame, ARobotWithoutPosesKeepsItsAnchor) {
+  Values v;
+  v.insert(poseKey(0), SE2(1, 2, 0.3));
+  v.insert(frameAnchorKey(0), SE2());
+  v.insert(frameAnchorKey(5), SE2(3.0, -1.0, 0.4));
+  v.insertPoint2(landmarkKey(7, 5), Vec2(2.0, 1.0));
+  const Values back = inOwnFrames(inCommonFrame(v), v);
+  EXPECT_NEAR((back.point2(back.slot(landmarkKey(7, 5))) - Vec2(2.0, 1.0)).norm(), 0.0, 1e-12);
+  EXPECT_NEAR(back.se2(back.slot(frameAnchorKey(5))).between(SE2(3.0, -1.0, 0.4)).vector().norm(),
+              0.0, 1e-12);
+}
+
 }  // namespace
 }  // namespace loopd
