@@ -29,8 +29,6 @@ FactorRole roleOf(int role) {
 
 }  // namespace
 
-Key anchorKey(std::uint32_t robot) { return makeKey(robot, KeyKind::Anchor, 0); }
-
 SE2 se2Of(const Values& v, Key k) { return v.se2(v.slot(k)); }
 SE3 se3Of(const Values& v, Key k) { return v.se3(v.slot(k)); }
 

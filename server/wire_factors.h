@@ -11,8 +11,6 @@
 
 namespace loopd::server {
 
-/// Robot r's anchor A_r: places r's frame in the common one.
-Key anchorKey(std::uint32_t robot);
 /// The pose at key k of v (k must be there).
 SE2 se2Of(const Values& v, Key k);
 SE3 se3Of(const Values& v, Key k);

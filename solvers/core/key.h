@@ -30,6 +30,8 @@ constexpr Key poseKey(std::uint64_t index, std::uint32_t robot = 0) {
 constexpr Key landmarkKey(std::uint64_t index, std::uint32_t robot = 0) {
   return makeKey(robot, KeyKind::Landmark, index);
 }
+/// Robot r's anchor A_r: places r's frame in the common one (multi-robot anchors).
+constexpr Key anchorKey(std::uint32_t robot) { return makeKey(robot, KeyKind::Anchor, 0); }
 constexpr std::uint32_t keyRobot(Key k) {
   return static_cast<std::uint32_t>(k >> (kKeyIndexBits + kKeyKindBits));
 }

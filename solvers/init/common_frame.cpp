@@ -16,7 +16,7 @@ bool movesWithFrame(Key k) {
 
 // slot of robot r's anchor in `values` (−1: none), per robot asked.
 int anchorSlot(const Values& values, std::uint32_t robot) {
-  return values.contains(frameAnchorKey(robot)) ? values.slot(frameAnchorKey(robot)) : -1;
+  return values.contains(anchorKey(robot)) ? values.slot(anchorKey(robot)) : -1;
 }
 
 // x ← A·x (or A⁻¹·x) for a pose or point slot, A the anchor in slot a of `anchors`.

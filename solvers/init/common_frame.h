@@ -1,7 +1,7 @@
 #pragma once
 // Several robots' graphs in one frame, for the linear starts. A robot whose frame is joined to
 // others keeps its poses and landmarks in its own frame, placed by its anchor A_r (a variable
-// keyed makeKey(r, KeyKind::Anchor, 0)); inter-robot closures are AnchoredBetweenFactors on
+// keyed anchorKey(r)); inter-robot closures are AnchoredBetweenFactors on
 // (A_r, x_r, A_s, x_s). The linear initializations join two-key factors only, so they left a
 // joined robot at its guess, bent or not. Here: each variable's common-frame value A_r·x, the
 // anchored between factors as plain between factors of those values, and the way back.
@@ -12,9 +12,6 @@
 #include "solvers/graph/factor_graph.h"
 
 namespace loopd {
-
-/// The anchor key of robot r's frame.
-constexpr Key frameAnchorKey(std::uint32_t robot) { return makeKey(robot, KeyKind::Anchor, 0); }
 
 /// Per robot, the slot of its lowest pose key in `values`.
 std::map<std::uint32_t, int> lowestPoseOfEachRobot(const Values& values);

@@ -266,16 +266,13 @@ Values initializeLinear(const FactorGraph& graph, const Values& guess, Key ancho
 }
 
 Values initializeLinearFromLowestPose(const FactorGraph& graph, const Values& guess) {
-  Key anchor = 0;
-  bool found = false;
-  for (int s = 0; s < guess.size(); ++s)
-    if (keyKind(guess.key(s)) == KeyKind::Pose && (!found || guess.key(s) < anchor))
-      anchor = guess.key(s), found = true;
-  if (!found || graph.empty()) return Values();
-  if (!holdsSeveralFrames(guess)) return initializeLinear(graph, guess, anchor);
-
-  // Each robot's lowest pose, in key order: the roots of the solves.
+  // Each robot's lowest pose, in key order (robot ids are the keys' high bits, so the first is
+  // the lowest pose key of all): the roots of the solves.
   const std::map<std::uint32_t, int> lowest = lowestPoseOfEachRobot(guess);
+  if (lowest.empty() || graph.empty()) return Values();
+  if (!holdsSeveralFrames(guess))
+    return initializeLinear(graph, guess, guess.key(lowest.begin()->second));
+
   const FactorGraph plain = withAnchoredBetweensPlain(graph);
   Values common = inCommonFrame(guess);
   std::vector<char> reached(static_cast<size_t>(guess.size()), 0);

@@ -148,7 +148,7 @@ TEST(ClosureLeverage, ClustersClosuresBetweenRobotsByTheirPoses) {
   Values values;
   for (std::uint32_t robot = 0; robot < 2; ++robot)
     for (int i = 0; i < 200; ++i) values.insert(poseKey(i, robot), SE2());
-  const Key a0 = makeKey(0, KeyKind::Anchor, 0), a1 = makeKey(1, KeyKind::Anchor, 0);
+  const Key a0 = anchorKey(0), a1 = anchorKey(1);
   values.insert(a0, SE2());
   values.insert(a1, SE2());
   auto across = [&](Key ar, Key x, Key as, Key y) {

@@ -122,7 +122,7 @@ TEST_P(GncInTwoRobots, StartsBothRobotsFromTheirOdometryAndClosures) {
       u.initial.set(s, SE2(0.0, 0.0, 0.3e-3 * static_cast<double>(keyIndex(u.initial.key(s)))) *
                            u.initial.se2(s));
   FactorId next = 1'000'000;
-  for (Key k : {frameAnchorKey(0), poseKey(0, 0), poseKey(0, 1)}) {
+  for (Key k : {anchorKey(0), poseKey(0, 0), poseKey(0, 1)}) {
     auto prior = std::make_shared<PriorFactorSE2>(k, split.values.se2(split.values.slot(k)),
                                                   Eigen::Matrix3d::Identity() * 1e8);
     prior->setId(next++);

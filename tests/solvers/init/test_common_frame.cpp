@@ -19,7 +19,7 @@ TEST(CommonFrame, SeveralFramesMeansAnAnchorOrASecondRobot) {
   Values two = one;
   two.insert(poseKey(0, 1), SE2());
   EXPECT_TRUE(holdsSeveralFrames(two));
-  one.insert(frameAnchorKey(0), SE2());
+  one.insert(anchorKey(0), SE2());
   EXPECT_TRUE(holdsSeveralFrames(one));
 }
 
@@ -44,8 +44,7 @@ TEST(CommonFrame, RoundTripsAndMovesFramesThroughTheirAnchors) {
     if (keyRobot(moved.key(s)) == 1 && keyKind(moved.key(s)) == KeyKind::Pose)
       moved.set(s, shift * moved.se2(s));
   const Values own = inOwnFrames(moved, split.values);
-  EXPECT_NEAR(own.se2(own.slot(frameAnchorKey(1))).between(shift * anchor).vector().norm(), 0.0,
-              1e-9);
+  EXPECT_NEAR(own.se2(own.slot(anchorKey(1))).between(shift * anchor).vector().norm(), 0.0, 1e-9);
   EXPECT_NEAR(own.se2(own.slot(poseKey(7, 1))).between(x).vector().norm(), 0.0, 1e-9);
 }
 
@@ -71,13 +70,13 @@ TEST(CommonFrame, AnchoredBetweensBecomePlainOnes) {
 TEST(CommonFrame, ARobotWithoutPosesKeepsItsAnchor) {
   Values v;
   v.insert(poseKey(0), SE2(1, 2, 0.3));
-  v.insert(frameAnchorKey(0), SE2());
-  v.insert(frameAnchorKey(5), SE2(3.0, -1.0, 0.4));
+  v.insert(anchorKey(0), SE2());
+  v.insert(anchorKey(5), SE2(3.0, -1.0, 0.4));
   v.insertPoint2(landmarkKey(7, 5), Vec2(2.0, 1.0));
   const Values back = inOwnFrames(inCommonFrame(v), v);
   EXPECT_NEAR((back.point2(back.slot(landmarkKey(7, 5))) - Vec2(2.0, 1.0)).norm(), 0.0, 1e-12);
-  EXPECT_NEAR(back.se2(back.slot(frameAnchorKey(5))).between(SE2(3.0, -1.0, 0.4)).vector().norm(),
-              0.0, 1e-12);
+  EXPECT_NEAR(back.se2(back.slot(anchorKey(5))).between(SE2(3.0, -1.0, 0.4)).vector().norm(), 0.0,
+              1e-12);
 }
 
 }  // namespace

@@ -35,8 +35,8 @@ inline TwoRobotSplit splitInTwo(const FactorGraph& graph, const Values& values, 
                       keyIndex(k) < at ? values.se2(s) : origin.inverse() * values.se2(s));
   }
   if (link) {
-    out.values.insert(frameAnchorKey(0), SE2());
-    out.values.insert(frameAnchorKey(1), robotOneAnchor);
+    out.values.insert(anchorKey(0), SE2());
+    out.values.insert(anchorKey(1), robotOneAnchor);
   }
   for (const FactorPtr& f : graph.factors()) {
     const auto* b = dynamic_cast<const BetweenFactorSE2*>(f.get());
@@ -46,8 +46,8 @@ inline TwoRobotSplit splitInTwo(const FactorGraph& graph, const Values& values, 
     if (keyRobot(x) == keyRobot(y))
       g = std::make_shared<BetweenFactorSE2>(x, y, b->measured(), b->information(), f->role());
     else if (link)
-      g = std::make_shared<AnchoredBetweenFactorSE2>(frameAnchorKey(keyRobot(x)), x,
-                                                     frameAnchorKey(keyRobot(y)), y, b->measured(),
+      g = std::make_shared<AnchoredBetweenFactorSE2>(anchorKey(keyRobot(x)), x,
+                                                     anchorKey(keyRobot(y)), y, b->measured(),
                                                      b->information(), f->role());
     if (!g) continue;
     g->setId(f->id());
