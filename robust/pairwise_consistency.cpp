@@ -175,16 +175,6 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& given, const Values&
   out.judged = m;
   if (m == 0) return out;
 
-  const double gate = chi2Quantile(planar ? 3 : 6, options.probability);
-  const size_t words = (static_cast<size_t>(m) + 63) / 64;
-  std::vector<std::uint64_t> adjacency(static_cast<size_t>(m) * words, 0);
-  std::vector<int> degree(m, 0);
-  auto connect = [&](int i, int j) {
-    adjacency[static_cast<size_t>(i) * words + j / 64] |= std::uint64_t{1} << (j % 64);
-    adjacency[static_cast<size_t>(j) * words + i / 64] |= std::uint64_t{1} << (i % 64);
-    ++degree[i];
-    ++degree[j];
-  };
   std::vector<Rigid> inverse(n);
   for (int k = 0; k < n; ++k) inverse[k] = pose[k].inverse();
   // The cycle of closures i and j: Δ and the denominators of the statistic's two terms;
@@ -263,6 +253,18 @@ ConsistentSet pairwiseConsistentClosures(const FactorGraph& given, const Values&
     }
   }
   out.calibration = calibration;
+  if (options.calibrationOnly) return out;
+
+  const double gate = chi2Quantile(planar ? 3 : 6, options.probability);
+  const size_t words = (static_cast<size_t>(m) + 63) / 64;
+  std::vector<std::uint64_t> adjacency(static_cast<size_t>(m) * words, 0);
+  std::vector<int> degree(m, 0);
+  auto connect = [&](int i, int j) {
+    adjacency[static_cast<size_t>(i) * words + j / 64] |= std::uint64_t{1} << (j % 64);
+    adjacency[static_cast<size_t>(j) * words + i / 64] |= std::uint64_t{1} << (i % 64);
+    ++degree[i];
+    ++degree[j];
+  };
   const double threshold = gate * calibration;
   for (int i = 0; i < m; ++i) {
     if (options.checkpoint) options.checkpoint();

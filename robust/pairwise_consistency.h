@@ -40,6 +40,9 @@ struct ConsistencyOptions {
   /// many poses long (0: off); used when there are at least minCalibrationPairs of them.
   int calibrationWindow = 5;
   int minCalibrationPairs = 30;
+  /// Stop once calibrated: only ConsistentSet::calibration, judged and calibrationPairs
+  /// (O(closures·window) instead of the O(closures²) pair tests).
+  bool calibrationOnly = false;
   /// Called before each closure's row of pair tests (the O(closures²) part); may throw to
   /// give the test up (GncOptions::interrupt).
   std::function<void()> checkpoint;

@@ -90,7 +90,8 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
     std::vector<FactorPtr> factors;
     for (const KeptBack& c : it->second) factors.push_back(c.factor);
     const std::vector<size_t> agree =
-        agreeingClosures(factors, odometry, poses, opt_.joinProbability);
+        agreeingClosures(factors, odometry, poses, opt_.joinProbability,
+                         ownClosureNoiseScale(ownAcceptedClosures(pair), odometry, poses));
     if (static_cast<int>(agree.size()) < opt_.joinAgreement) continue;
     const Factor& z = *it->second[agree.front()].factor;
     SE2 m2;
@@ -103,6 +104,20 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
     joinRobots(keyRobot(z.key(0)), keyRobot(z.key(1)), m2, m3, st);
   }
   releaseJoinedClosures(st);
+}
+
+std::vector<FactorPtr> Engine::ownAcceptedClosures(const RobotPair& pair) const {
+  const std::vector<FactorId> rejectedIds = backend_->rejected();
+  const std::set<FactorId> rejected(rejectedIds.begin(), rejectedIds.end());
+  std::vector<FactorPtr> out;
+  for (const auto& [id, f] : live_) {
+    if (!isUncertain(f->role()) || f->size() != 2 || rejected.count(id)) continue;
+    const Key a = f->key(0), b = f->key(1);
+    if (keyKind(a) == KeyKind::Pose && keyKind(b) == KeyKind::Pose && keyRobot(a) == keyRobot(b) &&
+        (keyRobot(a) == pair.first || keyRobot(a) == pair.second))
+      out.push_back(f);
+  }
+  return out;
 }
 
 void Engine::releaseJoinedClosures(Staged& st) {

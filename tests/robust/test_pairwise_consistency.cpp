@@ -180,6 +180,16 @@ TEST(PairwiseConsistency, ShortCyclesCalibrateUnderConfidentInformation) {
   int trueIn = 0;
   for (int i : s.trueClosures) trueIn += set.member[i];
   EXPECT_GE(trueIn, static_cast<int>(0.9 * s.trueClosures.size()));
+
+  // The calibration alone (the frame-join test's, server/closure_agreement.h): the same
+  // factor from the same short cycles, no set.
+  ConsistencyOptions only;
+  only.calibrationOnly = true;
+  const ConsistentSet calibrated = pairwiseConsistentClosures(s.graph, s.odometry, only);
+  EXPECT_EQ(calibrated.calibration, set.calibration);
+  EXPECT_EQ(calibrated.calibrationPairs, set.calibrationPairs);
+  EXPECT_EQ(calibrated.size, 0);
+  for (char m : calibrated.member) EXPECT_EQ(m, 0);
 }
 
 // Two closures with the same ends (poses 0 and 2, at one place, so no lever arm and no chain
