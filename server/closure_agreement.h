@@ -14,8 +14,8 @@
 // σ 1 m and 0.5–1 rad, while its optimum leaves them millimetres off). Judged at the stated
 // noise, any two closures agree over the lever arm of a robot's map, and two random wrong
 // ones joined robots 1 and 2 of parking-garage in three robots (mm and dcs then rejected
-// thousands of true closures). So the test is narrowed by how far the robots' own accepted
-// closures of one revisit agree with each other, as PCM calibrates itself on short cycles.
+// thousands of true closures). So the test is narrowed by how well the robots' own closures
+// of one revisit agree with each other, as PCM calibrates itself on short cycles.
 #include <cstddef>
 #include <vector>
 
@@ -40,8 +40,9 @@ std::vector<size_t> agreeingClosures(const std::vector<FactorPtr>& closures,
 /// (sphere2500's first true closures between two robots agreed from 3×; 10× leaves room).
 constexpr double kFartherPairsMargin = 10.0;
 
-/// The factor by which the stated covariances of `ownClosures` (the two robots' own accepted
-/// loop closures, each within one robot) are off: PCM's calibration (robust/
+/// The factor by which the stated covariances of `ownClosures` (the two robots' own loop
+/// closures, each within one robot, those the solver rejects left out; closures not solved
+/// yet count too) are off: PCM's calibration (robust/
 /// pairwise_consistency.h) on the pairs of them from one revisit, with the maps taken as exact
 /// as the agreement test takes them (the median of those pairs' statistic against
 /// χ²_dim(0.5)), times kFartherPairsMargin, at most 1: the test is only narrowed. 1 when there

@@ -275,9 +275,6 @@ class Engine : private GraphView {
   void stageInterRobotClosures(const std::vector<KeptBack>& closures, Staged& st);
   /// Releases the kept-back closures of every pair whose frames are joined now.
   void releaseJoinedClosures(Staged& st);
-  /// The pair's own loop closures (pose to pose within one robot) the solver accepts: their
-  /// fit scales the agreement test (ownClosureNoiseScale).
-  std::vector<FactorPtr> ownAcceptedClosures(const RobotPair& pair) const;
   /// The pose of s's frame in r's that between factor `z` (x_r → x_s) implies at the current
   /// (or staged) values: M = x_r·Z·x_s⁻¹.
   void frameOffset(const Factor& z, SE2& m2, SE3& m3) const;

@@ -72,14 +72,22 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
     if (static_cast<int>(it->second.size()) < opt_.joinAgreement ||
         shareFrame(pair.first, pair.second))
       continue;
-    // The two robots' odometry (committed, staged, this batch's) and poses, each in its frame.
-    std::vector<FactorPtr> odometry;
+    // The two robots' odometry and own loop closures (committed but those the solver rejects,
+    // staged, this batch's) and poses, each in its frame.
+    std::vector<FactorPtr> odometry, ownClosures;
     auto take = [&](const FactorPtr& f) {
-      if (f->role() == FactorRole::Odometry && f->size() == 2 && inPair(pair, f->key(0)) &&
-          keyRobot(f->key(1)) == keyRobot(f->key(0)) && keyKind(f->key(1)) == KeyKind::Pose)
+      if (f->size() != 2 || !inPair(pair, f->key(0)) || keyKind(f->key(1)) != KeyKind::Pose ||
+          keyRobot(f->key(1)) != keyRobot(f->key(0)))
+        return;
+      if (f->role() == FactorRole::Odometry)
         odometry.push_back(f);
+      else if (f->role() == FactorRole::LoopClosure)
+        ownClosures.push_back(f);
     };
-    for (const auto& [id, f] : live_) take(f);
+    const std::vector<FactorId> rejectedIds = backend_->rejected();
+    const std::set<FactorId> rejected(rejectedIds.begin(), rejectedIds.end());
+    for (const auto& [id, f] : live_)
+      if (!rejected.count(id)) take(f);
     for (const Staged& s : staged_)
       for (const FactorPtr& f : s.update.factors) take(f);
     for (const FactorPtr& f : st.update.factors) take(f);
@@ -91,7 +99,7 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
     for (const KeptBack& c : it->second) factors.push_back(c.factor);
     const std::vector<size_t> agree =
         agreeingClosures(factors, odometry, poses, opt_.joinProbability,
-                         ownClosureNoiseScale(ownAcceptedClosures(pair), odometry, poses));
+                         ownClosureNoiseScale(ownClosures, odometry, poses));
     if (static_cast<int>(agree.size()) < opt_.joinAgreement) continue;
     const Factor& z = *it->second[agree.front()].factor;
     SE2 m2;
@@ -104,20 +112,6 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
     joinRobots(keyRobot(z.key(0)), keyRobot(z.key(1)), m2, m3, st);
   }
   releaseJoinedClosures(st);
-}
-
-std::vector<FactorPtr> Engine::ownAcceptedClosures(const RobotPair& pair) const {
-  const std::vector<FactorId> rejectedIds = backend_->rejected();
-  const std::set<FactorId> rejected(rejectedIds.begin(), rejectedIds.end());
-  std::vector<FactorPtr> out;
-  for (const auto& [id, f] : live_) {
-    if (!isUncertain(f->role()) || f->size() != 2 || rejected.count(id)) continue;
-    const Key a = f->key(0), b = f->key(1);
-    if (keyKind(a) == KeyKind::Pose && keyKind(b) == KeyKind::Pose && keyRobot(a) == keyRobot(b) &&
-        (keyRobot(a) == pair.first || keyRobot(a) == pair.second))
-      out.push_back(f);
-  }
-  return out;
 }
 
 void Engine::releaseJoinedClosures(Staged& st) {

@@ -3,7 +3,7 @@
 // And queued replays under robust solvers: Victoria Park in two interleaved robots under
 // risam, manhattan with grouped wrong closures under gnc-tls and, as two robots, under risam
 // and gnc-gm, intel with random wrong closures as two robots under mm and gnc-gm, and
-// parking-garage with random ones as three robots under dcs and mm.
+// parking-garage with 100 and 1000 random ones as three robots under dcs and mm.
 #include <gtest/gtest.h>
 
 #include <set>
@@ -200,6 +200,19 @@ TEST(EngineRounds, RobustSolversInThreeRobotsJoinFramesAtTheClosuresRealNoise) {
   const Replay mmOneRobot = queuedAtOnce(noisy, 100, "mm");
   EXPECT_LE(trueRejected(mm, noisy, clean.edges.size()),
             trueRejected(mmOneRobot, noisy, clean.edges.size()) + 10);
+}
+
+// parking-garage + 1000 random wrong closures (seed 1) as three robots: two wrong closures
+// between robots arrive in the first round of 100 poses, before any of the robots' own
+// closures is solved, so a calibration over solved closures alone had none and the test kept
+// the stated noise: the frames joined there and dcs rejected 1086. The round's own closures
+// now count too, and dcs rejects the 1000 wrong ones alone.
+TEST(EngineRounds, DcsInThreeRobotsCalibratesOnTheRoundsOwnClosuresToo) {
+  const io::Dataset clean = io::readDataset(testing_live::kData + "/parking-garage.g2o");
+  const io::Dataset noisy = withWrongClosures(clean, 1000, tools::OutlierMode::Random, 1);
+  const Replay dcs = queuedAtOnce(noisy, 100, "dcs", 3, true);
+  EXPECT_EQ(dcs.rejected.size(), 1000u);
+  EXPECT_EQ(trueRejected(dcs, noisy, clean.edges.size()), 0u);
 }
 
 // gnc-gm on the same stream: its consistent-set start (PCM) judged each robot's own closures
