@@ -42,11 +42,10 @@ constexpr double kFartherPairsMargin = 10.0;
 
 /// The factor by which the stated covariances of `ownClosures` (the two robots' own loop
 /// closures, each within one robot, those the solver rejects left out; closures not solved
-/// yet count too) are off: PCM's calibration (robust/
-/// pairwise_consistency.h) on the pairs of them from one revisit, with the maps taken as exact
-/// as the agreement test takes them (the median of those pairs' statistic against
-/// χ²_dim(0.5)), times kFartherPairsMargin, at most 1: the test is only narrowed. 1 when there
-/// are too few such pairs.
+/// yet count too) are off: PCM's calibration (robust/pairwise_consistency.h) on the pairs of
+/// them from one revisit, with the maps taken as exact as the agreement test takes them (the
+/// median of those pairs' statistic against χ²_dim(0.5)), times kFartherPairsMargin, at most
+/// 1: the test is only narrowed. 1 when there are too few such pairs.
 double ownClosureNoiseScale(const std::vector<FactorPtr>& ownClosures,
                             const std::vector<FactorPtr>& odometry, const Values& poses);
 
