@@ -43,12 +43,12 @@ std::unique_ptr<Backend> robustInner(const BackendOptions& o, Isam2Options isam 
 }
 
 std::unique_ptr<Backend> decorated(const char* name, RobustMethod m, KernelType k,
-                                   const BackendOptions& o) {
+                                   const BackendOptions& o, Isam2Options isam = everyUpdate()) {
   RobustBackendOptions r;
   r.method = m;
   r.kernel = k;
   r.parameter = o.robustParameter;
-  return std::make_unique<RobustBackend>(name, robustInner(o), r);
+  return std::make_unique<RobustBackend>(name, robustInner(o, isam), r);
 }
 
 std::unique_ptr<Backend> gnc(GncLoss loss, const BackendOptions& o) {
@@ -91,9 +91,14 @@ std::vector<Entry>& registry() {
        [](const BackendOptions& o) {
          return decorated("sc", RobustMethod::Switchable, KernelType::DCS, o);
        }},
-      {{"mm", "max-mixtures (Olson 2013) over isam2; null weight 1e-7, sigma x1.6e7", true},
+      {{"mm",
+        "max-mixtures (Olson 2013) over isam2; null weight 1e-7, sigma x1.6e7, steps that raise "
+        "the mixture's cost cut back",
+        true},
        [](const BackendOptions& o) {
-         return decorated("mm", RobustMethod::MaxMixture, KernelType::DCS, o);
+         Isam2Options isam = everyUpdate();
+         isam.guardSteps = true;
+         return decorated("mm", RobustMethod::MaxMixture, KernelType::DCS, o, isam);
        }},
       {{"gnc-gm", "batch GNC, Geman-McClure (Yang 2020); cbar^2 = chi2_dim(0.99), noise-aware gate",
         false},

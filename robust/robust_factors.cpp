@@ -99,6 +99,24 @@ double kernelWeight(KernelType kernel, double chi2, double p) {
   return 1.0;
 }
 
+double kernelCost(KernelType kernel, double chi2, double p) {
+  const double k2 = p * p;
+  switch (kernel) {
+    case KernelType::Huber: {
+      const double n = std::sqrt(chi2);
+      return n <= p ? chi2 : 2.0 * p * n - k2;
+    }
+    case KernelType::Cauchy:
+      return k2 * std::log1p(chi2 / k2);
+    case KernelType::GemanMcClure:
+      return std::isfinite(chi2) ? k2 * chi2 / (k2 + chi2) : k2;
+    case KernelType::DCS:
+      if (chi2 <= p) return chi2;
+      return std::isfinite(chi2) ? p * (3.0 * chi2 - p) / (p + chi2) : 3.0 * p;
+  }
+  return chi2;
+}
+
 double defaultKernelParameter(KernelType kernel, int dim) {
   if (kernel == KernelType::DCS) return 1.0;
   return std::sqrt(chi2Quantile(std::max(dim, 1), 0.95));
@@ -137,6 +155,10 @@ void KernelFactor::evaluate(const double* const* x, double* r, double* const* J)
   for (int k = 0; k < dim(); ++k) c += r[k] * r[k];
   const double w = kernelWeight(kernel_, c, parameter_);
   if (w != 1.0) scaleBlocks(*this, size(), std::sqrt(w), r, J);
+}
+
+double KernelFactor::objective(const double* const* x) const {
+  return kernelCost(kernel_, inner_->chi2(x), parameter_);
 }
 
 std::unique_ptr<Factor> KernelFactor::clone() const {
@@ -227,6 +249,13 @@ std::unique_ptr<Factor> MaxMixtureFactor::clone() const {
   auto c = std::make_unique<MaxMixtureFactor>(*this);
   c->inner_ = inner_->clone();
   return c;
+}
+
+double MaxMixtureFactor::objective(const double* const* x) const {
+  const double c = inner_->chi2(x);
+  if (c <= switchChi2_) return c;
+  const double s2 = nullSigma_ * nullSigma_;
+  return c / s2 + switchChi2_ * (1.0 - 1.0 / s2);  // the null's normaliser, as in the ctor
 }
 
 bool MaxMixtureFactor::nullChosenAt(const Values& values) const {

@@ -35,6 +35,10 @@ double chi2Quantile(int dof, double p);
 ///   DCS(Φ):    min(1, 2Φ/(Φ + χ²))²                     (Agarwal et al. 2013)
 double kernelWeight(KernelType kernel, double chi2, double parameter);
 
+/// The kernel's cost ρ(χ²) (above; DCS: χ² up to Φ, then Φ(3χ² − Φ)/(Φ + χ²)), whose
+/// derivative in χ² is kernelWeight. Not finite χ²: the kernel's limit.
+double kernelCost(KernelType kernel, double chi2, double parameter);
+
 /// Default parameter for a factor of dimension dim: Huber/Cauchy/GM: k = √χ²_dim(0.95);
 /// DCS: Φ = 1.
 double defaultKernelParameter(KernelType kernel, int dim);
@@ -53,6 +57,8 @@ class KernelFactor final : public Factor {
   void evaluate(const double* const* x, double* r, double* const* J) const override;
   std::unique_ptr<Factor> clone() const override;
   const char* typeName() const override { return "Kernel"; }
+  /// ρ of the inner χ² (kernelCost).
+  double objective(const double* const* x) const override;
 
   const FactorPtr& inner() const { return inner_; }
   KernelType kernel() const { return kernel_; }
@@ -106,6 +112,9 @@ class MaxMixtureFactor final : public Factor {
   void evaluate(const double* const* x, double* r, double* const* J) const override;
   std::unique_ptr<Factor> clone() const override;
   const char* typeName() const override { return "MaxMixture"; }
+  /// The better component's cost relative to the inlier's normaliser: χ² up to switchChi2(),
+  /// then χ²/σ₀² plus the null's normaliser (continuous at the switch point).
+  double objective(const double* const* x) const override;
 
   const FactorPtr& inner() const { return inner_; }
   /// The null hypothesis wins when χ² exceeds this (both components share the mean):

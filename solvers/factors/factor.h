@@ -73,6 +73,11 @@ class Factor {
   double chi2(const Values& values) const;
   /// rᵀr with x[i] → storage of key(i), as evaluate() takes it (e.g. a snapshot's storage).
   double chi2(const double* const* x) const;
+  /// This factor's term of the objective a solver minimises, x as evaluate() takes it: rᵀr
+  /// for a least-squares factor. A robust wrapper whose residual is re-weighted at each
+  /// evaluation overrides it with its own cost (a kernel's ρ, a max-mixture's best component),
+  /// which rᵀr of its scaled residual is not. Solvers that judge a step's gain compare it.
+  virtual double objective(const double* const* x) const { return chi2(x); }
 
  protected:
   Factor(std::initializer_list<std::pair<Key, VarType>> vars, int dim, FactorRole role);

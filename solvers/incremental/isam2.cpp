@@ -46,6 +46,8 @@ int Isam2Backend::addVariable(const Values& from, int slot) {
   localIdx_.push_back(-1);
   constrainedStamp_.push_back(-1);
   movedStamp_.push_back(-1);
+  guardStamp_.push_back(-1);
+  guardIndex_.push_back(-1);
   touched_.push_back(updateCount_);
   if (firstPose_ < 0 && keyKind(theta_.key(v)) == KeyKind::Pose &&
       (theta_.type(v) == VarType::SE2 || theta_.type(v) == VarType::SE3))
@@ -73,6 +75,7 @@ int Isam2Backend::addFactor(const FactorPtr& f) {
   }
   factorVars_.push_back(vars);
   factorStamp_.push_back(-1);
+  guardFactorStamp_.push_back(-1);
   return index;
 }
 
@@ -194,7 +197,10 @@ UpdateResult Isam2Backend::update(const BackendUpdate& u) {
   result.relinearized = stats_.relinearized;
 
   recompute();
+  guardVars_.clear();
+  guardBefore_.clear();
   backSubstitute(&result.moved);
+  if (isam_.guardSteps) guardStep();
 
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return result;

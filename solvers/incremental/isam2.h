@@ -34,7 +34,14 @@ struct Isam2Options {
   // plain order (new factors' variables last). Keeps old variables off the root path.
   long recencyGrouping = 300;
   double recencyFillTolerance = 1.2;
-  double gaugeInformation = 1e8;          // internal prior on the first pose when no prior exists
+  double gaugeInformation = 1e8;  // internal prior on the first pose when no prior exists
+  // Each update's step is judged by the objective (Factor::objective) of the factors on the
+  // variables it moved: a step that raises it is cut back along its path to the best of
+  // 1/2, 1/4, …, 1/1024 of it, and those variables are relinearized there (the rest of the
+  // step waits for later updates). A max-mixture's undamped step toward a wrong closure it
+  // takes as an inlier can push every closure between two robots past its switch point at
+  // once; with nothing left to pull them back, the robots' frames stay apart.
+  bool guardSteps = false;
   int maxFinalIterations = 30;            // optimize(): full relinearizations at most
   double finalRelativeTolerance = 1e-10;  // optimize(): stop when chi2 improves less
 };
@@ -46,6 +53,7 @@ struct Isam2UpdateStats {
   int orphans = 0;
   int solvedCliques = 0;  // back-substitution visits
   int relinearized = 0;
+  double stepKept = 1.0;  // guardSteps: the fraction of the step kept
 };
 
 class Isam2Backend : public Backend {
@@ -160,6 +168,15 @@ class Isam2Backend : public Backend {
   bool fullSteps(int maxSteps, double relativeTolerance, double& previous, int& iterations,
                  bool* uphill = nullptr);
 
+  // --- the step guard (isam2_step_guard.cpp)
+  /// Keeps v's estimate before this update's step first changes it (guardSteps).
+  void recordBeforeStep(int v);
+  /// Cuts back a step that raised the objective (guardSteps); see Isam2Options.
+  void guardStep();
+  /// Σ objective of guardFactors_, the stepped variables read from `stepped`, the others
+  /// from the estimate.
+  double guardedObjective(const std::vector<double>& stepped) const;
+
   // --- re-elimination of the top (isam2_recompute.cpp)
   /// Re-eliminates the top formed by affected_ (constrained_ ordered last).
   void recompute();
@@ -210,6 +227,14 @@ class Isam2Backend : public Backend {
   std::vector<long> constrainedStamp_;
   std::vector<long> movedStamp_;
   std::vector<long> touched_;  // update count when a new factor last involved the variable
+  // Step guard: the variables this update's step changed (guardIndex_: position in it, valid
+  // when guardStamp_ is this epoch), their values before it, and the factors on them.
+  std::vector<long> guardStamp_;
+  std::vector<int> guardIndex_;
+  std::vector<int> guardVars_;
+  std::vector<double> guardBefore_, guardTrial_;  // kValueStride per guarded variable
+  std::vector<long> guardFactorStamp_;
+  std::vector<int> guardFactors_;
   int firstPose_ = -1;
   int newestVar_ = -1;
 

@@ -169,6 +169,48 @@ TEST(RobustFactors, MaxMixtureChoosesByNormalizedCost) {
   }
 }
 
+double objectiveAt(const Factor& f, const Values& values) {
+  std::vector<const double*> x(f.size());
+  for (int i = 0; i < f.size(); ++i) x[i] = values.data(values.slot(f.key(i)));
+  return f.objective(x.data());
+}
+
+// ρ(χ²) is what IRLS minimises: its slope in χ² is the weight, and it starts at 0 with slope 1.
+TEST(RobustKernels, CostIsTheIntegralOfTheWeight) {
+  for (KernelType k :
+       {KernelType::Huber, KernelType::Cauchy, KernelType::GemanMcClure, KernelType::DCS}) {
+    const double p = defaultKernelParameter(k, 3);
+    EXPECT_EQ(kernelCost(k, 0.0, p), 0.0) << kernelName(k);
+    for (double c : {0.3, 0.9, 1.7, 5.0, 20.0, 400.0}) {
+      const double h = 1e-5 * c;
+      const double slope = (kernelCost(k, c + h, p) - kernelCost(k, c - h, p)) / (2 * h);
+      EXPECT_NEAR(slope, kernelWeight(k, c, p), 1e-6) << kernelName(k) << " at " << c;
+    }
+  }
+  EXPECT_DOUBLE_EQ(kernelCost(KernelType::DCS, 1.0, 1.0), 1.0);  // continuous at χ² = Φ
+  EXPECT_DOUBLE_EQ(kernelCost(KernelType::DCS, 3.0, 1.0), 2.0);  // Φ(3χ² − Φ)/(Φ + χ²)
+  EXPECT_DOUBLE_EQ(kernelCost(KernelType::GemanMcClure, INFINITY, 2.0), 4.0);
+  Fixture2D fx(3.0);
+  const auto kf = KernelFactor::make(fx.between, KernelType::Cauchy);
+  const double p = defaultKernelParameter(KernelType::Cauchy, 3);
+  EXPECT_NEAR(objectiveAt(*kf, fx.values),
+              kernelCost(KernelType::Cauchy, fx.between->chi2(fx.values), p), 1e-12);
+  EXPECT_NEAR(objectiveAt(*fx.between, fx.values), fx.between->chi2(fx.values), 1e-12);
+}
+
+// A max-mixture's objective is its better component's −2 ln, relative to the inlier's
+// normaliser: χ² up to the switch point, then the null's χ²/σ₀² plus its normaliser.
+TEST(RobustFactors, MaxMixtureObjectiveIsTheBetterComponentsCost) {
+  for (double noise : {0.01, 1.0, 30.0}) {
+    Fixture2D fx(noise);
+    const auto m = MaxMixtureFactor::make(fx.between);
+    const double c = fx.between->chi2(fx.values), s2 = 1.6e7 * 1.6e7;
+    const double null = c / s2 + 2.0 * (3.0 * std::log(1.6e7) - std::log(1e-7));
+    EXPECT_NEAR(objectiveAt(*m, fx.values), std::min(c, null), 1e-9 * (1 + c)) << noise;
+    EXPECT_EQ(c > m->switchChi2(), noise == 30.0);  // both branches seen
+  }
+}
+
 TEST(RobustFactors, WeightedAndGraduatedJacobians) {
   Fixture2D fx(0.7);
   auto w = WeightedFactor::make(fx.between, 0.36);

@@ -3,7 +3,8 @@
 // And queued replays under robust solvers: Victoria Park in two interleaved robots under
 // risam, manhattan with grouped wrong closures under gnc-tls and, as two robots, under risam
 // and gnc-gm, intel with random wrong closures as two robots under mm and gnc-gm, and
-// parking-garage with 100 and 1000 random ones as three robots under dcs and mm.
+// parking-garage with 100 and 1000 random ones as three robots under dcs and mm, and mm's
+// steps that would drop true closures.
 #include <gtest/gtest.h>
 
 #include <set>
@@ -206,6 +207,26 @@ TEST(EngineRounds, RobustSolversInThreeRobotsJoinFramesAtTheClosuresRealNoise) {
   const Replay mmOneRobot = queuedAtOnce(noisy, 100, "mm");
   EXPECT_LE(trueRejected(mm, noisy, clean.edges.size()),
             trueRejected(mmOneRobot, noisy, clean.edges.size()) + 10);
+}
+
+// mm took each update's whole Gauss–Newton step. parking-garage + 100 random wrong closures,
+// seed 2, as three interleaved robots: 3113 rejected, 3015 of them true (one robot: 98).
+// Stepped pose by pose, a wrong closure some 9 m and 2.5 rad off came in under mm's switch
+// point (χ² 231), and the step toward it turned robots 1 and 2 about 0.55 rad and moved their
+// anchors some 90 m: every closure between robots went past the switch point at once and
+// nothing pulled the frames back. Seed 1 as one robot, in rounds, rejected 139 true closures.
+// iSAM2 now cuts back a step that raises the mixture's cost (Isam2Options::guardSteps): the
+// wrong closures alone are rejected.
+TEST(EngineRounds, MmCutsBackAStepThatWouldDropTrueClosures) {
+  const io::Dataset clean = io::readDataset(testing_live::kData + "/parking-garage.g2o");
+  const io::Dataset seed2 = withWrongClosures(clean, 100, tools::OutlierMode::Random, 2);
+  const Replay threeRobots = queuedAtOnce(seed2, 100, "mm", 3, true);
+  EXPECT_EQ(trueRejected(threeRobots, seed2, clean.edges.size()), 0u);
+  EXPECT_LE(threeRobots.rejected.size(), 100u);
+  const io::Dataset seed1 = withWrongClosures(clean, 100, tools::OutlierMode::Random, 1);
+  const Replay oneRobot = queuedAtOnce(seed1, 100, "mm");
+  EXPECT_EQ(trueRejected(oneRobot, seed1, clean.edges.size()), 0u);
+  EXPECT_LE(oneRobot.rejected.size(), 100u);
 }
 
 // parking-garage + 1000 random wrong closures (seed 1) as three robots: two wrong closures

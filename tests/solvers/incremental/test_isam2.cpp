@@ -528,6 +528,69 @@ TEST(Isam2, OptimizeTakesAtMostTheIterationsAsked) {
   }
 }
 
+// r = x² − 4 (σ 1), or, with a cap, a prior r = x − target whose objective stops at the cap
+// (a truncated cost, as a max-mixture's) while its residual keeps pulling.
+class ScalarTestFactor final : public Factor {
+ public:
+  ScalarTestFactor(Key k, bool square, double target, double cap = INFINITY)
+      : Factor({{k, VarType::Scalar}}, 1, FactorRole::LoopClosure),
+        square_(square),
+        target_(target),
+        cap_(cap) {}
+  void evaluate(const double* const* x, double* r, double* const* J) const override {
+    const double v = x[0][0];
+    r[0] = square_ ? v * v - target_ : v - target_;
+    if (J != nullptr && J[0] != nullptr) J[0][0] = square_ ? 2.0 * v : 1.0;
+  }
+  double objective(const double* const* x) const override { return std::min(chi2(x), cap_); }
+  std::unique_ptr<Factor> clone() const override {
+    return std::make_unique<ScalarTestFactor>(*this);
+  }
+  const char* typeName() const override { return "ScalarTest"; }
+
+ private:
+  bool square_;
+  double target_, cap_;
+};
+
+double scalarAfter(const BackendUpdate& first, const BackendUpdate& second, bool guard,
+                   double* kept) {
+  Isam2Options o;
+  o.guardSteps = guard;
+  Isam2Backend isam({}, o);
+  isam.update(first);
+  if (!second.factors.empty()) isam.update(second);
+  *kept = isam.lastUpdateStats().stepKept;
+  return isam.estimate().scalar(0);
+}
+
+// Gauss–Newton from x = 0.5 on r = x² − 4 steps to 4.25, where rᵀr is 197 against 14 at the
+// start; the guard keeps half the step (x = 2.375, rᵀr 2.7). A step that lowers rᵀr but
+// raises the objective is cut back too: toward a capped prior at 10 from a prior at 0, the
+// whole step (x = 5) takes the objective from 4 to 29, and no halving gets it below 4, so the
+// smallest one is kept.
+TEST(Isam2, GuardedStepsCutBackAStepThatRaisesTheObjective) {
+  const Key x = makeKey(0, KeyKind::Switch, 0);
+  BackendUpdate overshoot;
+  overshoot.initial.insertScalar(x, 0.5);
+  overshoot.factors = {std::make_shared<ScalarTestFactor>(x, true, 4.0)};
+  double kept = 0.0;
+  EXPECT_NEAR(scalarAfter(overshoot, {}, false, &kept), 4.25, 1e-12);
+  EXPECT_EQ(kept, 1.0);
+  EXPECT_NEAR(scalarAfter(overshoot, {}, true, &kept), 2.375, 1e-12);
+  EXPECT_EQ(kept, 0.5);
+
+  BackendUpdate start, capped;
+  start.initial.insertScalar(x, 0.0);
+  start.factors = {std::make_shared<ScalarTestFactor>(x, false, 0.0)};
+  auto far = std::make_shared<ScalarTestFactor>(x, false, 10.0, 4.0);
+  far->setId(1);
+  capped.factors = {far};
+  EXPECT_NEAR(scalarAfter(start, capped, false, &kept), 5.0, 1e-9);
+  EXPECT_NEAR(scalarAfter(start, capped, true, &kept), 5.0 / 1024, 1e-9);
+  EXPECT_EQ(kept, 1.0 / 1024);
+}
+
 TEST(Isam2, IsRegisteredAsIncremental) {
   bool found = false;
   for (const auto& info : availableBackends())
