@@ -199,8 +199,10 @@ UpdateResult Isam2Backend::update(const BackendUpdate& u) {
   recompute();
   guardVars_.clear();
   guardBefore_.clear();
+  guarding_ = isam_.guardSteps;  // update()'s step only: optimize() judges its own steps
   backSubstitute(&result.moved);
-  if (isam_.guardSteps) guardStep();
+  if (guarding_) guardStep();
+  guarding_ = false;
 
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return result;

@@ -235,6 +235,7 @@ class Isam2Backend : public Backend {
   std::vector<double> guardBefore_, guardTrial_;  // kValueStride per guarded variable
   std::vector<long> guardFactorStamp_;
   std::vector<int> guardFactors_;
+  bool guarding_ = false;  // update()'s back-substitution, with guardSteps
   int firstPose_ = -1;
   int newestVar_ = -1;
 

@@ -327,7 +327,7 @@ bool Isam2Backend::solveClique(const Clique& C, std::vector<Key>* moved) {
       anyChanged = true;
     }
     if (change > 0.0) {
-      if (isam_.guardSteps) recordBeforeStep(v);
+      if (guarding_) recordBeforeStep(v);
       std::memcpy(estimate_.data(v), theta_.data(v), sizeof(double) * kValueStride);
       estimate_.retract(v, dv);
     }

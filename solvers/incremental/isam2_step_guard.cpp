@@ -13,8 +13,9 @@ namespace loopd {
 
 namespace {
 
-/// The point a fraction t along the path from a to b (storage of one variable of type type):
-/// poses along the group's geodesic in a's frame, points and scalars on the straight line.
+/// The point a fraction t along a path from a to b (storage of one variable of type type):
+/// SE3 along the group's geodesic, SE2 by scaling the relative pose's (x, y, θ) in a's
+/// frame, points and scalars on the straight line.
 void along(VarType type, const double* a, const double* b, double t, double* out) {
   switch (type) {
     case VarType::SE2: {
