@@ -116,18 +116,27 @@ double Isam2Backend::deltaMax(int v) const {
   return m;
 }
 
+void Isam2Backend::relinearizeAtEstimate(int v) {
+  // θ ← θ ⊕ Δ is exactly the current estimate; Δ restarts from zero.
+  std::memcpy(theta_.data(v), estimate_.data(v), sizeof(double) * kValueStride);
+  std::fill_n(&delta_[static_cast<size_t>(v) * kMaxVarDim], kMaxVarDim, 0.0);
+  ++stats_.relinearized;
+}
+
+void Isam2Backend::markWithItsFactors(int v) {
+  // Every factor on v changes its linearization: the cliques holding those factors (the
+  // clique of the factor's first-eliminated variable) must be re-eliminated.
+  markAffected(v);
+  for (int f : varFactors_[v])
+    for (int k = 0; k < factors_[f]->size(); ++k) markAffected(factorVars_[f][k]);
+}
+
 void Isam2Backend::relinearize(bool all) {
-  auto relinearizeVar = [&](int v) {
-    // θ ← θ ⊕ Δ is exactly the current estimate; Δ restarts from zero.
-    std::memcpy(theta_.data(v), estimate_.data(v), sizeof(double) * kValueStride);
-    std::fill_n(&delta_[static_cast<size_t>(v) * kMaxVarDim], kMaxVarDim, 0.0);
-    ++stats_.relinearized;
-  };
   if (all) {
     for (int v = 0; v < theta_.size(); ++v) {
       relinCandidate_[v] = 0;
       if (varFactors_[v].empty()) continue;
-      relinearizeVar(v);
+      relinearizeAtEstimate(v);
       markAffected(v);
     }
     relinCandidates_.clear();
@@ -136,12 +145,8 @@ void Isam2Backend::relinearize(bool all) {
   for (int v : relinCandidates_) {
     relinCandidate_[v] = 0;
     if (cliqueOf_[v] < 0 || deltaMax(v) < isam_.relinearizeThreshold) continue;
-    relinearizeVar(v);
-    // Every factor on v changes its linearization: the cliques holding those factors (the
-    // clique of the factor's first-eliminated variable) must be re-eliminated.
-    markAffected(v);
-    for (int f : varFactors_[v])
-      for (int k = 0; k < factors_[f]->size(); ++k) markAffected(factorVars_[f][k]);
+    relinearizeAtEstimate(v);
+    markWithItsFactors(v);
   }
   relinCandidates_.clear();
 }

@@ -157,6 +157,10 @@ class Isam2Backend : public Backend {
   void markAffected(int v);
   void manageGauge();
   void relinearize(bool all);
+  /// θ of v ← its estimate, Δ ← 0 (counted in stats_.relinearized).
+  void relinearizeAtEstimate(int v);
+  /// Marks v and every variable of its factors affected (v's linearization changed).
+  void markWithItsFactors(int v);
   double deltaMax(int v) const;
   /// Every variable relinearized at the current estimate (Δ = 0) and the tree recomputed.
   void relinearizeAllAtEstimate();
@@ -173,9 +177,9 @@ class Isam2Backend : public Backend {
   void recordBeforeStep(int v);
   /// Cuts back a step that raised the objective (guardSteps); see Isam2Options.
   void guardStep();
-  /// Σ objective of guardFactors_, the stepped variables read from `stepped`, the others
-  /// from the estimate.
-  double guardedObjective(const std::vector<double>& stepped) const;
+  /// Σ objective of guardFactors_, the stepped variables read from `stepped` (null: the
+  /// estimate, where the step left them), the others from the estimate.
+  double guardedObjective(const std::vector<double>* stepped) const;
 
   // --- re-elimination of the top (isam2_recompute.cpp)
   /// Re-eliminates the top formed by affected_ (constrained_ ordered last).
@@ -232,7 +236,7 @@ class Isam2Backend : public Backend {
   std::vector<long> guardStamp_;
   std::vector<int> guardIndex_;
   std::vector<int> guardVars_;
-  std::vector<double> guardBefore_, guardTrial_;  // kValueStride per guarded variable
+  std::vector<double> guardBefore_;  // kValueStride per guarded variable
   std::vector<long> guardFactorStamp_;
   std::vector<int> guardFactors_;
   bool guarding_ = false;  // update()'s back-substitution, with guardSteps

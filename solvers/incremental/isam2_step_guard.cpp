@@ -51,15 +51,16 @@ void Isam2Backend::recordBeforeStep(int v) {
   guardBefore_.insert(guardBefore_.end(), x, x + kValueStride);
 }
 
-double Isam2Backend::guardedObjective(const std::vector<double>& stepped) const {
+double Isam2Backend::guardedObjective(const std::vector<double>* stepped) const {
   double sum = 0.0;
   std::array<const double*, kMaxFactorKeys> x{};
   for (int f : guardFactors_) {
     const Factor& F = *factors_[f];
     for (int k = 0; k < F.size(); ++k) {
       const int v = factorVars_[f][k];
-      x[k] = guardStamp_[v] == epoch_ ? &stepped[static_cast<size_t>(guardIndex_[v]) * kValueStride]
-                                      : estimate_.data(v);
+      x[k] = stepped && guardStamp_[v] == epoch_
+                 ? &(*stepped)[static_cast<size_t>(guardIndex_[v]) * kValueStride]
+                 : estimate_.data(v);
     }
     sum += F.objective(x.data());
   }
@@ -76,26 +77,22 @@ void Isam2Backend::guardStep() {
         guardFactorStamp_[f] = epoch_;
         guardFactors_.push_back(f);
       }
-  const size_t n = guardVars_.size() * kValueStride;
-  std::vector<double>& stepped = guardTrial_;
-  stepped.resize(n);
-  for (size_t i = 0; i < guardVars_.size(); ++i)
-    std::memcpy(&stepped[i * kValueStride], estimate_.data(guardVars_[i]),
-                sizeof(double) * kValueStride);
-  const double before = guardedObjective(guardBefore_);
-  const double taken = guardedObjective(stepped);
+  const double before = guardedObjective(&guardBefore_);
+  const double taken = guardedObjective(nullptr);
   if (taken <= before * (1.0 + 1e-9) + 1e-12) return;
 
-  // Halve along the path until the objective drops below where the step started.
-  std::vector<double> trial(n), best;
+  // Halve along the path until the objective drops below where the step started. The
+  // estimate still holds the whole step until the best point is written back.
+  std::vector<double> trial(guardBefore_.size()), best;
   double bestCost = taken, t = 1.0;
   for (int i = 0; i < 10; ++i) {
     t *= 0.5;
     for (size_t j = 0; j < guardVars_.size(); ++j) {
+      const int v = guardVars_[j];
       const size_t o = j * kValueStride;
-      along(estimate_.type(guardVars_[j]), &guardBefore_[o], &stepped[o], t, &trial[o]);
+      along(estimate_.type(v), &guardBefore_[o], estimate_.data(v), t, &trial[o]);
     }
-    const double c = guardedObjective(trial);
+    const double c = guardedObjective(&trial);
     if (c < bestCost) {
       bestCost = c;
       best = trial;
@@ -110,21 +107,16 @@ void Isam2Backend::guardStep() {
   // the new tree's step from there waits for later updates, as after resetEstimate().
   const long stepEpoch = epoch_++;
   affected_.clear();
-  const int kept = stats_.relinearized;
   if (newestVar_ >= 0) constrainedStamp_[newestVar_] = epoch_;
   for (size_t j = 0; j < guardVars_.size(); ++j) {
     const int v = guardVars_[j];
     if (constrainedStamp_[v] == stepEpoch) constrainedStamp_[v] = epoch_;  // still ordered last
     std::memcpy(estimate_.data(v), &best[j * kValueStride], sizeof(double) * kValueStride);
     if (varFactors_[v].empty()) continue;
-    std::memcpy(theta_.data(v), estimate_.data(v), sizeof(double) * kValueStride);
-    std::fill_n(&delta_[static_cast<size_t>(v) * kMaxVarDim], kMaxVarDim, 0.0);
-    markAffected(v);
-    for (int f : varFactors_[v])
-      for (int k = 0; k < factors_[f]->size(); ++k) markAffected(factorVars_[f][k]);
+    relinearizeAtEstimate(v);
+    markWithItsFactors(v);
   }
   recompute();
-  stats_.relinearized = kept + static_cast<int>(guardVars_.size());
 }
 
 }  // namespace loopd
