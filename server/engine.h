@@ -36,7 +36,10 @@
 // transform between the frames, and a wrong one bends both maps from then on. A pair's kept-back
 // closures join the frames once EngineOptions::joinAgreement of them agree on that transform
 // (closure_agreement.h); all of them then go in, judged by the solver like any other. Another
-// factor joining the frames first releases them the same way.
+// factor joining the frames first releases them the same way. A group of wrong closures agrees
+// with itself, so such a join is checked again as the pair's closures grow (joinChecks_,
+// engine_join_check.cpp): the robot it placed moves to a set of closures that outnumbers the
+// joining ones' more than twice, and the solver is rebuilt there.
 //
 // An ambiguous alternative never creates an anchor (under "none" or another alternative it
 // would be unconstrained, and each alternative implies another anchor value): an inter-robot
@@ -104,6 +107,7 @@ struct EngineCounters {
   std::int64_t accepted = 0, rejected = 0, duplicate = 0, expired = 0, held = 0, updates = 0,
                decodeFailed = 0, internalErrors = 0, journaled = 0;
   std::int64_t divergences = 0;  // solver steps that ranAway() (solver rebuilt, round refused)
+  std::int64_t rejoins = 0;  // joins moved to a larger agreeing set of closures (solver rebuilt)
 };
 
 /// The engine treats an estimate as diverged (a solver that ran away) when a number in it is
@@ -150,8 +154,9 @@ class Engine : private GraphView {
     Key firstPose = 0;
     std::int64_t latestIndex = -1;
     bool anchored = false;
-    std::uint32_t parent = 0;  // union-find parent (itself when root)
-    FactorId anchorPrior = 0;  // the anchor's prior factor (strong for a group root)
+    std::uint32_t parent = 0;      // union-find parent (itself when root)
+    FactorId anchorPrior = 0;      // the anchor's prior factor (strong for a group root)
+    std::int64_t placedFrom = -1;  // the robot whose frame a join placed this one's anchor from
   };
   struct Owner {
     std::string sender;
@@ -172,6 +177,16 @@ class Engine : private GraphView {
     Owner owner;
   };
   using RobotPair = std::pair<std::uint32_t, std::uint32_t>;  // lower robot first
+  /// A pair's frames joined where some of its closures agreed (engine_join_check.cpp): a group
+  /// of mutually consistent wrong closures agrees too, so the join is checked again as the
+  /// pair's closures grow.
+  struct JoinCheck {
+    std::uint32_t placed = 0;         // the robot (or group root) the join placed, from the other
+    std::set<FactorId> joiners;       // the agreeing closures the frames were joined at
+    std::vector<FactorPtr> closures;  // the pair's judged closures since, single-frame forms
+    size_t checkedAt = 0;             // closures.size() at the last check
+    bool settled = false;             // no longer checked (kept for the placements it made)
+  };
   struct Decoded {
     std::shared_ptr<const loopd::factor_batch_t> batch;
     std::shared_ptr<const Inbound> raw;
@@ -188,6 +203,8 @@ class Engine : private GraphView {
     std::vector<FactorId> groupRemovals;  // internal ids of ambiguous groups removed
     std::map<RobotPair, std::vector<KeptBack>> pendingBefore;
     std::map<RobotPair, std::vector<KeptBack>> closuresBefore;
+    std::vector<std::pair<RobotPair, JoinCheck>> joinsMade;  // committed into joinChecks_
+    std::vector<FactorPtr> pairClosures;  // judged inter-robot closures in, single-frame forms
     std::map<std::uint32_t, std::uint32_t> adoptedBefore;
   };
   struct Held {
@@ -275,6 +292,22 @@ class Engine : private GraphView {
   void stageInterRobotClosures(const std::vector<KeptBack>& closures, Staged& st);
   /// Releases the kept-back closures of every pair whose frames are joined now.
   void releaseJoinedClosures(Staged& st);
+  /// Indices into `closures` (single-frame inter-robot closures of `pair`) of the largest set
+  /// that agrees on the transform between the pair's frames (closure_agreement.h), at the two
+  /// robots' maps with the staged rounds (and `building`) applied.
+  std::vector<size_t> agreeingPairClosures(const RobotPair& pair,
+                                           const std::vector<FactorPtr>& closures,
+                                           const Staged* building) const;
+  /// Checks each join made at agreeing closures once the pair's closures have grown by
+  /// kJoinCheckGrowth (engine_join_check.cpp): when a larger set of them agrees on another
+  /// transform than the one the frames were joined at, the robots the join placed are moved
+  /// there and the solver is rebuilt from the graph at that start (`moved`: every variable).
+  void checkJoins(std::vector<Key>& moved);
+  /// Moves the robot `j` placed (its anchor, so everything in its frame), and every robot a
+  /// join placed from one that moves (RobotInfo::placedFrom), to where `agree` (closures of
+  /// `pair`) puts it, rebuilds the solver there and records `agree` as the join's closures.
+  /// False when a moving robot's anchor has a prior (it cannot follow).
+  bool rejoin(const RobotPair& pair, JoinCheck& j, const std::vector<FactorPtr>& agree);
   /// The pose of s's frame in r's that between factor `z` (x_r → x_s) implies at the current
   /// (or staged) values: M = x_r·Z·x_s⁻¹.
   void frameOffset(const Factor& z, SE2& m2, SE3& m3) const;
@@ -301,7 +334,8 @@ class Engine : private GraphView {
   void publishStatus(std::int64_t requestId, bool fullDecisions, int hypotheses = -1);
   std::vector<loopd::loop_decision_t> decisionList(bool full);
   Eigen::MatrixXd commonFrameCovariance(const std::vector<Key>& keys);
-  void rebuildBackend(const std::string& solver);
+  /// A new `solver` fed the committed graph, started at `start` (default: the estimate).
+  void rebuildBackend(const std::string& solver, const Values* start = nullptr);
   /// SAVE_SNAPSHOT (engine_snapshot.cpp): the graph and estimate as g2o at path. Throws
   /// std::exception saying why it could not be written.
   void writeSnapshot(const std::string& path) const;
@@ -345,6 +379,7 @@ class Engine : private GraphView {
   std::map<std::uint32_t, std::uint32_t> adopted_;      // landmark namespace → its frame's robot
   std::map<RobotPair, std::vector<KeptBack>> pending_;  // sightings waiting for a join
   std::map<RobotPair, std::vector<KeptBack>> pendingClosures_;  // closures waiting for agreement
+  std::map<RobotPair, JoinCheck> joinChecks_;  // joins made at agreeing closures, still checked
   bool regroupNeeded_ = false;
 
   std::vector<Staged> staged_;

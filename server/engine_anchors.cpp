@@ -75,6 +75,7 @@ void Engine::joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const S
     N.anchorPrior = insertAnchor(anchorKey(n), a2, a3, 0.0);  // the factors determine it
     N.anchored = true;
     N.parent = root(o);
+    N.placedFrom = o;
     spdlog::info("robot {} joins robot {}'s frame", n, root(o));
     return;
   }
@@ -86,6 +87,7 @@ void Engine::joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const S
   if (RS.anchorPrior != 0) u.removals.push_back(RS.anchorPrior);
   RS.anchorPrior = 0;
   RS.parent = rr;
+  RS.placedFrom = r;
   spdlog::info("robot group of {} merges into robot {}'s frame", rs, rr);
 }
 

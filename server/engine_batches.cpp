@@ -282,6 +282,7 @@ Engine::StageResult Engine::stage(const Decoded& d, std::vector<Key>& waiting) {
         keptClosures.push_back({f, owner});
         continue;
       }
+      if (!joinsAtOnce(*f)) st.pairClosures.push_back(f);  // judged, between joined frames
       SE2 m2;
       SE3 m3;
       frameOffset(*f, m2, m3);
@@ -435,6 +436,11 @@ void Engine::commit(Staged& s) {
       if (s.owners[i].uncertain) ++loopClosures_;
     }
   }
+  for (auto& [pair, check] : s.joinsMade) joinChecks_[pair] = std::move(check);
+  for (const FactorPtr& f : s.pairClosures) {
+    const auto it = joinChecks_.find(std::minmax(keyRobot(f->key(0)), keyRobot(f->key(1))));
+    if (it != joinChecks_.end()) it->second.closures.push_back(f);
+  }
   for (const Group& g : s.groups) groups_[g.factor.id] = g;
   for (FactorId r : s.groupRemovals) {
     groups_.erase(r);
@@ -538,6 +544,7 @@ void Engine::flush() {
     moved.assign(movedSet.begin(), movedSet.end());
   }
   if (regroupNeeded_) regroup(moved);
+  checkJoins(moved);
   const double sec = std::chrono::duration<double>(Clock::now() - t0).count();
   dirty_ = true;
   if (!replaying_)

@@ -64,42 +64,14 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
     list.push_back(c);
     arrived.insert(pair);
   }
-  auto inPair = [](const RobotPair& p, Key k) {
-    return keyKind(k) == KeyKind::Pose && (keyRobot(k) == p.first || keyRobot(k) == p.second);
-  };
   for (const RobotPair& pair : arrived) {
     const auto it = pendingClosures_.find(pair);
     if (static_cast<int>(it->second.size()) < opt_.joinAgreement ||
         shareFrame(pair.first, pair.second))
       continue;
-    // The two robots' odometry and own loop closures (committed but those the solver rejects,
-    // staged, this batch's) and poses, each in its frame.
-    std::vector<FactorPtr> odometry, ownClosures;
-    auto take = [&](const FactorPtr& f) {
-      if (f->size() != 2 || !inPair(pair, f->key(0)) || keyKind(f->key(1)) != KeyKind::Pose ||
-          keyRobot(f->key(1)) != keyRobot(f->key(0)))
-        return;
-      if (f->role() == FactorRole::Odometry)
-        odometry.push_back(f);
-      else if (f->role() == FactorRole::LoopClosure)
-        ownClosures.push_back(f);
-    };
-    const std::vector<FactorId> rejectedIds = backend_->rejected();
-    const std::set<FactorId> rejected(rejectedIds.begin(), rejectedIds.end());
-    for (const auto& [id, f] : live_)
-      if (!rejected.count(id)) take(f);
-    for (const Staged& s : staged_)
-      for (const FactorPtr& f : s.update.factors) take(f);
-    for (const FactorPtr& f : st.update.factors) take(f);
-    Values poses;
-    for (const Values* v : {&backend_->estimate(), static_cast<const Values*>(&stagedValues_)})
-      for (int s = 0; s < v->size(); ++s)
-        if (inPair(pair, v->key(s))) poses.insertFrom(*v, s);
     std::vector<FactorPtr> factors;
     for (const KeptBack& c : it->second) factors.push_back(c.factor);
-    const std::vector<size_t> agree =
-        agreeingClosures(factors, odometry, poses, opt_.joinProbability,
-                         ownClosureNoiseScale(ownClosures, odometry, poses));
+    const std::vector<size_t> agree = agreeingPairClosures(pair, factors, &st);
     if (static_cast<int>(agree.size()) < opt_.joinAgreement) continue;
     const Factor& z = *it->second[agree.front()].factor;
     SE2 m2;
@@ -109,9 +81,50 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
         "robots {} and {}: {} of their {} kept-back loop closures agree; joining their "
         "frames",
         pair.first, pair.second, agree.size(), it->second.size());
-    joinRobots(keyRobot(z.key(0)), keyRobot(z.key(1)), m2, m3, st);
+    // The robot the join places (joinRobots): the one not anchored yet (the second when
+    // neither is), else the root of the second's group, which follows the factor.
+    const std::uint32_t r = keyRobot(z.key(0)), s = keyRobot(z.key(1));
+    JoinCheck check;
+    check.placed = !robots_.at(s).anchored ? s : !robots_.at(r).anchored ? r : root(s);
+    for (size_t a : agree) check.joiners.insert(it->second[a].factor->id());
+    st.joinsMade.emplace_back(pair, std::move(check));
+    joinRobots(r, s, m2, m3, st);
   }
   releaseJoinedClosures(st);
+}
+
+std::vector<size_t> Engine::agreeingPairClosures(const RobotPair& pair,
+                                                 const std::vector<FactorPtr>& closures,
+                                                 const Staged* building) const {
+  auto inPair = [&](Key k) {
+    return keyKind(k) == KeyKind::Pose && (keyRobot(k) == pair.first || keyRobot(k) == pair.second);
+  };
+  // The two robots' odometry and own loop closures (committed but those the solver rejects,
+  // staged, `building`'s) and poses, each in its frame.
+  std::vector<FactorPtr> odometry, ownClosures;
+  auto take = [&](const FactorPtr& f) {
+    if (f->size() != 2 || !inPair(f->key(0)) || keyKind(f->key(1)) != KeyKind::Pose ||
+        keyRobot(f->key(1)) != keyRobot(f->key(0)))
+      return;
+    if (f->role() == FactorRole::Odometry)
+      odometry.push_back(f);
+    else if (f->role() == FactorRole::LoopClosure)
+      ownClosures.push_back(f);
+  };
+  const std::vector<FactorId> rejectedIds = backend_->rejected();
+  const std::set<FactorId> rejected(rejectedIds.begin(), rejectedIds.end());
+  for (const auto& [id, f] : live_)
+    if (!rejected.count(id)) take(f);
+  for (const Staged& s : staged_)
+    for (const FactorPtr& f : s.update.factors) take(f);
+  if (building)
+    for (const FactorPtr& f : building->update.factors) take(f);
+  Values poses;
+  for (const Values* v : {&backend_->estimate(), static_cast<const Values*>(&stagedValues_)})
+    for (int s = 0; s < v->size(); ++s)
+      if (inPair(v->key(s))) poses.insertFrom(*v, s);
+  return agreeingClosures(closures, odometry, poses, opt_.joinProbability,
+                          ownClosureNoiseScale(ownClosures, odometry, poses));
 }
 
 void Engine::releaseJoinedClosures(Staged& st) {
@@ -124,6 +137,7 @@ void Engine::releaseJoinedClosures(Staged& st) {
     for (const KeptBack& c : it->second) {
       st.update.factors.push_back(anchoredFactor(*c.factor));
       st.owners.push_back(c.owner);
+      st.pairClosures.push_back(c.factor);
     }
     spdlog::debug("robots {} and {} share a frame: their {} kept-back loop closures go in", a, b,
                   it->second.size());

@@ -92,12 +92,12 @@ std::unique_ptr<PerFactorRobustBackend> Engine::makeSolver(const std::string& na
   return std::make_unique<PerFactorRobustBackend>(makeBackend(name, backendOptions()));
 }
 
-void Engine::rebuildBackend(const std::string& solver) {
+void Engine::rebuildBackend(const std::string& solver, const Values* start) {
   std::unique_ptr<PerFactorRobustBackend> next = makeSolver(solver);
   BackendUpdate all;
   for (const auto& [id, f] : live_) all.factors.push_back(f);
   for (const auto& [id, g] : groups_) all.ambiguous.push_back(g.factor);  // in arrival order
-  all.initial = backend_->estimate();
+  all.initial = start ? *start : backend_->estimate();
   feedRebuilt(*next, std::move(all));
   backend_ = std::move(next);
   lastDecisions_.clear();
@@ -120,6 +120,7 @@ void Engine::resetAll() {
   adopted_.clear();
   pending_.clear();
   pendingClosures_.clear();
+  joinChecks_.clear();
   staged_.clear();
   stagedValues_ = Values();
   holds_.clear();
