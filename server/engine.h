@@ -185,7 +185,6 @@ class Engine : private GraphView {
     std::set<FactorId> joiners;       // the agreeing closures the frames were joined at
     std::vector<FactorPtr> closures;  // the pair's judged closures since, single-frame forms
     size_t checkedAt = 0;             // closures.size() at the last check
-    bool settled = false;             // no longer checked (kept for the placements it made)
   };
   struct Decoded {
     std::shared_ptr<const loopd::factor_batch_t> batch;

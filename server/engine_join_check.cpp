@@ -43,10 +43,6 @@ void Engine::checkJoins(std::vector<Key>& moved) {
       it = joinChecks_.erase(it);
       continue;
     }
-    if (j.settled) {
-      ++it;
-      continue;
-    }
     j.closures.erase(std::remove_if(j.closures.begin(), j.closures.end(),
                                     [&](const FactorPtr& f) { return !live_.count(f->id()); }),
                      j.closures.end());
@@ -61,12 +57,10 @@ void Engine::checkJoins(std::vector<Key>& moved) {
       return j.joiners.count(j.closures[i]->id()) > 0;
     });
     if (holds || static_cast<int>(largest.size()) < opt_.joinAgreement) {
-      if (holds && j.closures.size() >= kJoinSettledClosures) {
-        j.settled = true;
-        j.closures.clear();
-        j.closures.shrink_to_fit();
-      }
-      ++it;
+      if (holds && j.closures.size() >= kJoinSettledClosures)
+        it = joinChecks_.erase(it);  // its placement stays in RobotInfo::placedFrom
+      else
+        ++it;
       continue;
     }
     // The joining closures' own set is among the rest: the largest set there bounds it.
