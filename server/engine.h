@@ -254,7 +254,10 @@ class Engine : private GraphView {
   std::uint32_t root(std::uint32_t r) const;
   /// Joins r's and s's frames (anchors created or groups merged) given M, the pose of s's frame
   /// in r's: from an inter-robot between factor M = x_r·Z·x_s⁻¹, from sightings an alignment.
-  void joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const SE3& m3, Staged& st);
+  /// Returns the robot whose anchor the join placed (the newcomer, or the root of the group
+  /// that follows), −1 when the frames were joined already.
+  std::int64_t joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const SE3& m3,
+                          Staged& st);
   /// Cross-robot sightings (engine_sightings.cpp): the batch's are kept back while their
   /// robots' frames are not joined; all of a pair's go in (anchored) once its frames are joined
   /// or its sightings fix the transform between them. The batch's guessed values are staged
@@ -291,12 +294,19 @@ class Engine : private GraphView {
   void stageInterRobotClosures(const std::vector<KeptBack>& closures, Staged& st);
   /// Releases the kept-back closures of every pair whose frames are joined now.
   void releaseJoinedClosures(Staged& st);
-  /// Indices into `closures` (single-frame inter-robot closures of `pair`) of the largest set
-  /// that agrees on the transform between the pair's frames (closure_agreement.h), at the two
-  /// robots' maps with the staged rounds (and `building`) applied.
-  std::vector<size_t> agreeingPairClosures(const RobotPair& pair,
-                                           const std::vector<FactorPtr>& closures,
-                                           const Staged* building) const;
+  /// What the agreement test of a pair's closures reads (closure_agreement.h): the two robots'
+  /// odometry and poses, each in its frame, and the noise scale of their own closures.
+  struct PairMaps {
+    std::vector<FactorPtr> odometry;
+    Values poses;
+    double closureScale = 1.0;
+  };
+  /// The pair's maps with the staged rounds (and `building`) applied.
+  PairMaps pairMaps(const RobotPair& pair, const Staged* building) const;
+  /// Indices into `closures` (single-frame inter-robot closures of the pair) of the largest
+  /// set that agrees on the transform between the pair's frames, at `maps`.
+  std::vector<size_t> agreeingPairClosures(const PairMaps& maps,
+                                           const std::vector<FactorPtr>& closures) const;
   /// Checks each join made at agreeing closures once the pair's closures have grown by
   /// kJoinCheckGrowth (engine_join_check.cpp): when a larger set of them agrees on another
   /// transform than the one the frames were joined at, the robots the join placed are moved

@@ -25,8 +25,8 @@ FactorPtr Engine::priorAt(Key k, const Values& from, int slot, double informatio
   return f;
 }
 
-void Engine::joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const SE3& m3,
-                        Staged& st) {
+std::int64_t Engine::joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const SE3& m3,
+                                Staged& st) {
   RobotInfo& R = robots_.at(r);
   RobotInfo& S = robots_.at(s);
   BackendUpdate& u = st.update;
@@ -77,10 +77,10 @@ void Engine::joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const S
     N.parent = root(o);
     N.placedFrom = o;
     spdlog::info("robot {} joins robot {}'s frame", n, root(o));
-    return;
+    return n;
   }
   const std::uint32_t rr = root(r), rs = root(s);
-  if (rr == rs) return;
+  if (rr == rs) return -1;
   // Two anchored groups: s's group root loses its strong prior (a negligible one keeps it
   // well posed) and the group follows the factor.
   RobotInfo& RS = robots_.at(rs);
@@ -89,6 +89,7 @@ void Engine::joinRobots(std::uint32_t r, std::uint32_t s, const SE2& m2, const S
   RS.parent = rr;
   RS.placedFrom = r;
   spdlog::info("robot group of {} merges into robot {}'s frame", rs, rr);
+  return rs;
 }
 
 void Engine::regroup(std::vector<Key>& moved) {

@@ -71,7 +71,7 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
       continue;
     std::vector<FactorPtr> factors;
     for (const KeptBack& c : it->second) factors.push_back(c.factor);
-    const std::vector<size_t> agree = agreeingPairClosures(pair, factors, &st);
+    const std::vector<size_t> agree = agreeingPairClosures(pairMaps(pair, &st), factors);
     if (static_cast<int>(agree.size()) < opt_.joinAgreement) continue;
     const Factor& z = *it->second[agree.front()].factor;
     SE2 m2;
@@ -81,33 +81,30 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
         "robots {} and {}: {} of their {} kept-back loop closures agree; joining their "
         "frames",
         pair.first, pair.second, agree.size(), it->second.size());
-    // The robot the join places (joinRobots): the one not anchored yet (the second when
-    // neither is), else the root of the second's group, which follows the factor.
-    const std::uint32_t r = keyRobot(z.key(0)), s = keyRobot(z.key(1));
+    const std::int64_t placed = joinRobots(keyRobot(z.key(0)), keyRobot(z.key(1)), m2, m3, st);
+    if (placed < 0) continue;  // cannot happen: the pair does not share a frame
     JoinCheck check;
-    check.placed = !robots_.at(s).anchored ? s : !robots_.at(r).anchored ? r : root(s);
+    check.placed = static_cast<std::uint32_t>(placed);
     for (size_t a : agree) check.joiners.insert(it->second[a].factor->id());
     st.joinsMade.emplace_back(pair, std::move(check));
-    joinRobots(r, s, m2, m3, st);
   }
   releaseJoinedClosures(st);
 }
 
-std::vector<size_t> Engine::agreeingPairClosures(const RobotPair& pair,
-                                                 const std::vector<FactorPtr>& closures,
-                                                 const Staged* building) const {
+Engine::PairMaps Engine::pairMaps(const RobotPair& pair, const Staged* building) const {
   auto inPair = [&](Key k) {
     return keyKind(k) == KeyKind::Pose && (keyRobot(k) == pair.first || keyRobot(k) == pair.second);
   };
   // The two robots' odometry and own loop closures (committed but those the solver rejects,
   // staged, `building`'s) and poses, each in its frame.
-  std::vector<FactorPtr> odometry, ownClosures;
+  PairMaps maps;
+  std::vector<FactorPtr> ownClosures;
   auto take = [&](const FactorPtr& f) {
     if (f->size() != 2 || !inPair(f->key(0)) || keyKind(f->key(1)) != KeyKind::Pose ||
         keyRobot(f->key(1)) != keyRobot(f->key(0)))
       return;
     if (f->role() == FactorRole::Odometry)
-      odometry.push_back(f);
+      maps.odometry.push_back(f);
     else if (f->role() == FactorRole::LoopClosure)
       ownClosures.push_back(f);
   };
@@ -119,12 +116,17 @@ std::vector<size_t> Engine::agreeingPairClosures(const RobotPair& pair,
     for (const FactorPtr& f : s.update.factors) take(f);
   if (building)
     for (const FactorPtr& f : building->update.factors) take(f);
-  Values poses;
   for (const Values* v : {&backend_->estimate(), static_cast<const Values*>(&stagedValues_)})
     for (int s = 0; s < v->size(); ++s)
-      if (inPair(v->key(s))) poses.insertFrom(*v, s);
-  return agreeingClosures(closures, odometry, poses, opt_.joinProbability,
-                          ownClosureNoiseScale(ownClosures, odometry, poses));
+      if (inPair(v->key(s))) maps.poses.insertFrom(*v, s);
+  maps.closureScale = ownClosureNoiseScale(ownClosures, maps.odometry, maps.poses);
+  return maps;
+}
+
+std::vector<size_t> Engine::agreeingPairClosures(const PairMaps& maps,
+                                                 const std::vector<FactorPtr>& closures) const {
+  return agreeingClosures(closures, maps.odometry, maps.poses, opt_.joinProbability,
+                          maps.closureScale);
 }
 
 void Engine::releaseJoinedClosures(Staged& st) {

@@ -52,7 +52,8 @@ void Engine::checkJoins(std::vector<Key>& moved) {
       continue;
     }
     j.checkedAt = j.closures.size();
-    const std::vector<size_t> largest = agreeingPairClosures(pair, j.closures, nullptr);
+    const PairMaps maps = pairMaps(pair, nullptr);
+    const std::vector<size_t> largest = agreeingPairClosures(maps, j.closures);
     const bool holds = std::any_of(largest.begin(), largest.end(), [&](size_t i) {
       return j.joiners.count(j.closures[i]->id()) > 0;
     });
@@ -69,7 +70,7 @@ void Engine::checkJoins(std::vector<Key>& moved) {
     std::vector<FactorPtr> rest, agree;
     for (size_t i = 0; i < j.closures.size(); ++i)
       (inLargest[i] ? agree : rest).push_back(j.closures[i]);
-    const size_t restLargest = agreeingPairClosures(pair, rest, nullptr).size();
+    const size_t restLargest = agreeingPairClosures(maps, rest).size();
     if (agree.size() > kRejoinMargin * restLargest) {
       spdlog::warn(
           "robots {} and {}: {} of their {} loop closures agree on another transform between "
