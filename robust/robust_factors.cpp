@@ -258,6 +258,13 @@ double MaxMixtureFactor::objective(const double* const* x) const {
   return c / s2 + switchChi2_ * (1.0 - 1.0 / s2);  // the null's normaliser, as in the ctor
 }
 
+bool MaxMixtureFactor::heldAt(const double* const* x, FactorPtr& inner, double& weight) const {
+  const double c = inner_->chi2(x);
+  inner = inner_;
+  weight = c > switchChi2_ || !std::isfinite(c) ? 1.0 / (nullSigma_ * nullSigma_) : 1.0;
+  return true;
+}
+
 bool MaxMixtureFactor::nullChosenAt(const Values& values) const {
   const double c = chi2At(*inner_, values);
   return c > switchChi2_ || !std::isfinite(c);

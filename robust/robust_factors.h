@@ -115,6 +115,8 @@ class MaxMixtureFactor final : public Factor {
   /// The better component's cost relative to the inlier's normaliser: χ² up to switchChi2(),
   /// then χ²/σ₀² plus the null's normaliser (continuous at the switch point).
   double objective(const double* const* x) const override;
+  /// The better component at x held: the inner factor at weight 1 or 1/σ₀².
+  bool heldAt(const double* const* x, FactorPtr& inner, double& weight) const override;
 
   const FactorPtr& inner() const { return inner_; }
   /// The null hypothesis wins when χ² exceeds this (both components share the mean):

@@ -39,6 +39,9 @@ struct RobustRequest {
 /// Jacobian buffer of one key: dim × varDim, column-major with leading dimension dim.
 using JacobianBlock = std::array<double, kMaxResidualDim * kMaxVarDim>;
 
+class Factor;
+using FactorPtr = std::shared_ptr<const Factor>;
+
 class Factor {
  public:
   virtual ~Factor() = default;
@@ -78,6 +81,16 @@ class Factor {
   /// evaluation overrides it with its own cost (a kernel's ρ, a max-mixture's best component),
   /// which rᵀr of its scaled residual is not. Solvers that judge a step's gain compare it.
   virtual double objective(const double* const* x) const { return chi2(x); }
+  /// A robust wrapper whose objective() is at most `weight` × its inner factor's rᵀr plus a
+  /// constant, with equality at x (its re-weighting held as at x), gives that inner factor
+  /// and weight and returns true: least squares over such terms bounds the objective from
+  /// above, so lowering it lowers the objective. Least-squares factors return false.
+  virtual bool heldAt(const double* const* x, FactorPtr& inner, double& weight) const {
+    (void)x, (void)inner, (void)weight;
+    return false;
+  }
+  /// objective() at values (all keys must be present).
+  double objectiveAt(const Values& values) const { return objective(storageIn(values).data()); }
 
  protected:
   Factor(std::initializer_list<std::pair<Key, VarType>> vars, int dim, FactorRole role);
@@ -94,8 +107,6 @@ class Factor {
   FactorId id_ = 0;
   RobustRequest robust_;
 };
-
-using FactorPtr = std::shared_ptr<const Factor>;
 
 /// The largest information (diagonal entry of Ω) a factor takes: σ ≥ 3.2e-8.
 constexpr double kMaxInformation = 1e15;

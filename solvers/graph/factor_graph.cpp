@@ -8,4 +8,10 @@ double FactorGraph::chi2(const Values& values) const {
   return sum;
 }
 
+double FactorGraph::objective(const Values& values) const {
+  double sum = 0.0;
+  for (const auto& f : factors_) sum += f->objectiveAt(values);
+  return sum;
+}
+
 }  // namespace loopd

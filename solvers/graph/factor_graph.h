@@ -18,6 +18,9 @@ class FactorGraph {
 
   /// Σ rᵀr over all factors (g2o's chi2). Throws if a key is missing from values.
   double chi2(const Values& values) const;
+  /// Σ Factor::objective over all factors: what a solver minimises (chi2 unless robust
+  /// wrappers re-weight their residuals).
+  double objective(const Values& values) const;
 
  private:
   std::vector<FactorPtr> factors_;

@@ -234,6 +234,13 @@ void Isam2Backend::resetEstimate(const Values& x) {
 }
 
 double Isam2Backend::costWithGauge() const {
+  // Under guardSteps the objective: a max-mixture's rᵀr drops when a closure passes its switch
+  // point, so judged by it a step that throws out true closures looks downhill.
+  if (isam_.guardSteps) {
+    double c = graph_.objective(estimate_);
+    if (gaugeFactor_ >= 0) c += factors_[gaugeFactor_]->objectiveAt(estimate_);
+    return c;
+  }
   double c = graph_.chi2(estimate_);
   if (gaugeFactor_ >= 0) c += factors_[gaugeFactor_]->chi2(estimate_);
   return c;
@@ -284,16 +291,19 @@ void Isam2Backend::optimize() {
     const int steps = std::min(isam_.maxFinalIterations, budget - iterations);
     converged = fullSteps(steps, isam_.finalRelativeTolerance, previous, iterations, &uphill);
     if (converged || round == 1 || iterations >= budget) break;
-    // Gauss–Newton went uphill: Levenberg–Marquardt on the whole graph, then rebuild.
+    // Gauss–Newton went uphill: Levenberg–Marquardt on the whole graph (under guardSteps on
+    // its held majorizer, heldDescent), then rebuild.
     usedBatch = true;
+    if (isam_.guardSteps) {
+      heldDescent(budget, previous, iterations);
+      continue;
+    }
     FactorGraph all = graph_;
     if (gaugeFactor_ >= 0) all.add(factors_[gaugeFactor_]);
-    std::vector<char> fixed(estimate_.size(), 0);
-    for (int v = 0; v < estimate_.size(); ++v) fixed[v] = varFactors_[v].empty() ? 1 : 0;
     OptimizerOptions o;
     o.method = OptimizerMethod::LevenbergMarquardt;
     o.maxIterations = budget - iterations;
-    NonlinearOptimizer lm(all, estimate_, fixed, o);
+    NonlinearOptimizer lm(all, estimate_, fixedForBatch(), o);
     const OptimizerResult r = lm.optimize(estimate_);
     iterations += r.iterations;
     previous = costWithGauge();

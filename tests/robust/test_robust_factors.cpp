@@ -211,6 +211,45 @@ TEST(RobustFactors, MaxMixtureObjectiveIsTheBetterComponentsCost) {
   }
 }
 
+// heldAt (isam2's fallback under guardSteps minimises the held least squares): the component
+// chosen at x, as its inner factor at weight 1 or 1/σ₀², bounds the objective from above up to
+// a constant and touches it at x, on both sides of the switch point. Least squares hold nothing.
+TEST(RobustFactors, MaxMixtureHeldAtBoundsItsObjectiveFromAbove) {
+  for (double noise : {0.01, 1.0, 30.0}) {
+    Fixture2D fx(noise);
+    const auto m = MaxMixtureFactor::make(fx.between);
+    std::vector<const double*> x{fx.values.data(0), fx.values.data(1)};
+    FactorPtr inner;
+    double w = 0.0;
+    ASSERT_TRUE(m->heldAt(x.data(), inner, w));
+    EXPECT_EQ(inner, fx.between);
+    const bool null = fx.between->chi2(fx.values) > m->switchChi2();
+    EXPECT_EQ(w, null ? 1.0 / (1.6e7 * 1.6e7) : 1.0) << noise;
+    const double k = objectiveAt(*m, fx.values) - w * fx.between->chi2(fx.values);
+    // Points around x, and where pose 1 agrees with the measurement (χ² = 0).
+    std::vector<Values> ys;
+    for (double step : {-2.0, -0.7, -0.05, 0.05, 0.3, 1.0, 3.0}) {
+      ys.push_back(fx.values);
+      const double d[3] = {step, -0.5 * step, 0.3 * step};
+      ys.back().retract(1, d);
+    }
+    ys.push_back(fx.values);
+    ys.back().set(1, fx.values.se2(0) * static_cast<const BetweenFactorSE2&>(*inner).measured());
+    int crossed = 0;
+    for (const Values& y : ys) {
+      const double c = fx.between->chi2(y);
+      crossed += (c > m->switchChi2()) != null;
+      EXPECT_LE(objectiveAt(*m, y), w * c + k + 1e-9 * (1.0 + c)) << noise << " at χ² " << c;
+    }
+    EXPECT_GT(crossed, 0) << noise;  // the bound is tested across the switch point too
+  }
+  FactorPtr inner;
+  double w = 0.0;
+  Fixture2D fx(1.0);
+  std::vector<const double*> x{fx.values.data(0), fx.values.data(1)};
+  EXPECT_FALSE(fx.between->heldAt(x.data(), inner, w));
+}
+
 TEST(RobustFactors, WeightedAndGraduatedJacobians) {
   Fixture2D fx(0.7);
   auto w = WeightedFactor::make(fx.between, 0.36);

@@ -174,17 +174,19 @@ TEST(EngineRounds, RisamInTwoRobotsKeepsItsGateWhereWrongJoinsBendTheMaps) {
 // inter-robot closures in feed order are wrong ones, and the first joined the robots' frames
 // (--join-agreement 1, as before): mm then rejected the true inter-robot closures that
 // disagreed with it, 204 rejected, 14 m off the optimum (one robot: exact). Now the frames
-// join once two closures agree, and the replay ends exact.
+// join once two closures agree, and the replay ends exact. From the first closure's join, mm
+// ended there until its optimize() descended the mixture's own objective instead of rᵀr
+// (Isam2Backend::heldDescent): it now ends exact from that join too.
 TEST(EngineRounds, MmInTwoRobotsJoinsTheFramesWhereClosuresAgree) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/intel.g2o");
   const io::Dataset noisy = withWrongClosures(clean, 100, tools::OutlierMode::Random, 1);
   const Replay optimum = queuedAtOnce(clean, 100, "lm", 2, true);
-  const Replay r = queuedAtOnce(noisy, 100, "mm", 2, true);
-  EXPECT_EQ(r.rejected.size(), 100u);
-  EXPECT_LT(test::largestPositionGap(r.estimate, optimum.estimate), 1e-3);  // metres
-  const Replay firstJoins = queuedAtOnce(noisy, 100, "mm", 2, true, 1);
-  EXPECT_GT(firstJoins.rejected.size(), 150u);
-  EXPECT_GT(test::largestPositionGap(firstJoins.estimate, optimum.estimate), 1.0);
+  for (int joinAgreement : {server::EngineOptions{}.joinAgreement, 1}) {
+    SCOPED_TRACE(joinAgreement);
+    const Replay r = queuedAtOnce(noisy, 100, "mm", 2, true, joinAgreement);
+    EXPECT_EQ(r.rejected.size(), 100u);
+    EXPECT_LT(test::largestPositionGap(r.estimate, optimum.estimate), 1e-3);  // metres
+  }
 }
 
 // intel + 100 wrong closures in groups of 10 (seed 2), queued as three interleaved robots: the
@@ -208,13 +210,13 @@ TEST(EngineRounds, RobustSolversInThreeRobotsMoveAFrameJoinedAtAWrongGroup) {
   }
 }
 
-// `file` + 100 wrong closures (`mode`, `seed`) queued as three interleaved robots under mm: a
-// join is moved, and no true closure rejected.
+// `file` + 100 wrong closures (`mode`, `seed`) queued as three interleaved robots under mm, in
+// rounds of `posesPerUpdate` poses: a join is moved, and no true closure rejected.
 Replay expectMmInThreeRobotsMovesAJoin(const std::string& file, tools::OutlierMode mode,
-                                       std::uint64_t seed) {
+                                       std::uint64_t seed, int posesPerUpdate = 100) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/" + file);
   const io::Dataset noisy = withWrongClosures(clean, 100, mode, seed);
-  const Replay r = queuedAtOnce(noisy, 100, "mm", 3, true);
+  const Replay r = queuedAtOnce(noisy, posesPerUpdate, "mm", 3, true);
   EXPECT_GE(r.rejoins, 1);
   EXPECT_LE(r.rejected.size(), 100u);
   EXPECT_EQ(trueRejected(r, noisy, clean.edges.size()), 0u);
@@ -235,10 +237,18 @@ TEST(EngineRounds, MmInThreeRobotsMovesTheRobotsPlacedFromAWrongJoin) {
 // joined at 2 of their 9 kept-back closures, on maps bent where one revisit's closures disagree,
 // and mm rejected 2555 closures, 2457 of them true (one robot: 97, none true). 114 of the pair's
 // first 231 closures agree on another transform (at most 20 with the join): robot 1 moves there
-// and mm ends as with one robot. Through the server, whose rounds follow the batches' arrival,
-// robot 1 moves too but mm still fails (README, Known issues).
+// and mm ends as with one robot.
 TEST(EngineRounds, MmInThreeRobotsMovesAFrameJoinedOnBentMaps) {
   expectMmInThreeRobotsMovesAJoin("parking-garage.g2o", tools::OutlierMode::Random, 3);
+}
+
+// The same in rounds of 20 poses (the server's rounds follow the batches' arrival): robot 1 moved
+// too, but the last optimize() found Gauss–Newton uphill and fell back to Levenberg–Marquardt on
+// rᵀr, which a max-mixture lowers by pushing closures past their switch point: 461 rejected, 364
+// of them true (through the server 2730–2840, nearly every closure between robots). The fallback
+// now lowers mm's own objective (Isam2Backend::heldDescent).
+TEST(EngineRounds, MmInThreeRobotsEndsWithoutDroppingTheClosuresBetweenThemInSmallRounds) {
+  expectMmInThreeRobotsMovesAJoin("parking-garage.g2o", tools::OutlierMode::Random, 3, 20);
 }
 
 // `noisy` (`clean` with wrong closures appended) queued as three interleaved robots under dcs:
