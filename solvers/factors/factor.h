@@ -85,8 +85,7 @@ class Factor {
   /// constant, with equality at x (its re-weighting held as at x), gives that inner factor
   /// and weight and returns true: least squares over such terms bounds the objective from
   /// above, so lowering it lowers the objective. Least-squares factors return false.
-  virtual bool heldAt(const double* const* x, FactorPtr& inner, double& weight) const {
-    (void)x, (void)inner, (void)weight;
+  virtual bool heldAt(const double* const* /*x*/, FactorPtr& /*inner*/, double& /*weight*/) const {
     return false;
   }
   /// objective() at values (all keys must be present).

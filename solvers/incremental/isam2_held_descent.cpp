@@ -34,6 +34,7 @@ void Isam2Backend::heldDescent(int budget, double& previous, int& iterations) {
   weights.reserve(static_cast<size_t>(graph_.size()) + 1);
   std::array<const double*, kMaxFactorKeys> x{};
   double lambda = OptimizerOptions{}.initialLambda;
+  const std::vector<char> fixed = fixedForBatch();
   while (iterations < budget) {
     held.factors().clear();
     heldBefore.swap(weights);
@@ -52,7 +53,7 @@ void Isam2Backend::heldDescent(int budget, double& previous, int& iterations) {
     o.method = OptimizerMethod::LevenbergMarquardt;
     o.maxIterations = std::min(kHeldSolveIterations, budget - iterations);
     o.initialLambda = lambda;  // the damping carried from one held solve to the next
-    NonlinearOptimizer lm(held, estimate_, fixedForBatch(), o);
+    NonlinearOptimizer lm(held, estimate_, fixed, o);
     const Values before = estimate_;
     const OptimizerResult r = lm.optimize(estimate_, weights.data());
     iterations += std::max(r.iterations, 1);
