@@ -161,6 +161,12 @@ double KernelFactor::objective(const double* const* x) const {
   return kernelCost(kernel_, inner_->chi2(x), parameter_);
 }
 
+bool KernelFactor::heldAt(const double* const* x, FactorPtr& inner, double& weight) const {
+  inner = inner_;
+  weight = kernelWeight(kernel_, inner_->chi2(x), parameter_);
+  return true;
+}
+
 std::unique_ptr<Factor> KernelFactor::clone() const {
   auto c = std::make_unique<KernelFactor>(*this);
   c->inner_ = inner_->clone();

@@ -59,6 +59,9 @@ class KernelFactor final : public Factor {
   const char* typeName() const override { return "Kernel"; }
   /// ρ of the inner χ² (kernelCost).
   double objective(const double* const* x) const override;
+  /// The inner factor at the kernel's weight at x, ρ'(χ²): ρ is concave in χ² for every
+  /// kernel here, so w·χ² + const bounds it from above, touching it at x (IRLS as MM).
+  bool heldAt(const double* const* x, FactorPtr& inner, double& weight) const override;
 
   const FactorPtr& inner() const { return inner_; }
   KernelType kernel() const { return kernel_; }

@@ -234,15 +234,10 @@ void Isam2Backend::resetEstimate(const Values& x) {
 }
 
 double Isam2Backend::costWithGauge() const {
-  // Under guardSteps the objective: a max-mixture's rᵀr drops when a closure passes its switch
-  // point, so judged by it a step that throws out true closures looks downhill.
-  if (isam_.guardSteps) {
-    double c = graph_.objective(estimate_);
-    if (gaugeFactor_ >= 0) c += factors_[gaugeFactor_]->objectiveAt(estimate_);
-    return c;
-  }
-  double c = graph_.chi2(estimate_);
-  if (gaugeFactor_ >= 0) c += factors_[gaugeFactor_]->chi2(estimate_);
+  // The objective, not rᵀr: a max-mixture's rᵀr drops when a closure passes its switch point,
+  // so judged by it a step that throws out true closures looks downhill (see optimize()).
+  double c = graph_.objective(estimate_);
+  if (gaugeFactor_ >= 0) c += factors_[gaugeFactor_]->objectiveAt(estimate_);
   return c;
 }
 
@@ -291,13 +286,10 @@ void Isam2Backend::optimize() {
     const int steps = std::min(isam_.maxFinalIterations, budget - iterations);
     converged = fullSteps(steps, isam_.finalRelativeTolerance, previous, iterations, &uphill);
     if (converged || round == 1 || iterations >= budget) break;
-    // Gauss–Newton went uphill: Levenberg–Marquardt on the whole graph (under guardSteps on
-    // its held majorizer, heldDescent), then rebuild.
+    // Gauss–Newton went uphill: Levenberg–Marquardt on the whole graph (on its held
+    // majorizer, heldDescent, if any factor re-weights its residual), then rebuild.
     usedBatch = true;
-    if (isam_.guardSteps) {
-      heldDescent(budget, previous, iterations);
-      continue;
-    }
+    if (heldDescent(budget, previous, iterations)) continue;
     FactorGraph all = graph_;
     if (gaugeFactor_ >= 0) all.add(factors_[gaugeFactor_]);
     OptimizerOptions o;

@@ -41,11 +41,6 @@ struct Isam2Options {
   // step waits for later updates). A max-mixture's undamped step toward a wrong closure it
   // takes as an inlier can push every closure between two robots past its switch point at
   // once; with nothing left to pull them back, the robots' frames stay apart.
-  // optimize() judges its full steps by the objective too, and where Gauss–Newton goes uphill
-  // falls back to heldDescent instead of Levenberg–Marquardt on rᵀr: judged by rᵀr, a
-  // max-mixture's step that pushes closures past their switch point looks downhill (their
-  // rᵀr falls to ~0 under the broad null), and that fallback could end with the closures
-  // between two robots all rejected.
   bool guardSteps = false;
   int maxFinalIterations = 30;            // optimize(): full relinearizations at most
   double finalRelativeTolerance = 1e-10;  // optimize(): stop when the cost improves less
@@ -67,6 +62,14 @@ class Isam2Backend : public Backend {
 
   std::string name() const override { return "isam2"; }
   UpdateResult update(const BackendUpdate& update) override;
+  /// Full Gauss–Newton steps from the whole tree relinearized at the estimate, judged by the
+  /// objective (Factor::objective: rᵀr for least squares, a kernel's ρ, a max-mixture's
+  /// better component); where one goes uphill, heldDescent, or plain Levenberg–Marquardt if
+  /// every factor is least squares. Judged by rᵀr of the re-weighted residuals instead, a
+  /// step that pushes closures out looks downhill (a max-mixture's rᵀr falls to ~0 past its
+  /// switch point, DCS's w(χ²)·χ² as χ² grows past Φ): that fallback had ended with the
+  /// closures between two robots all rejected (mm), with 423 of sphere2500's first 450
+  /// closures rejected (dcs at once).
   void optimize() override;
   /// The next update checks for relinearization whatever relinearizeSkip says (a caller
   /// about to change factors' weights in steps: riSAM's graduation).
@@ -169,8 +172,8 @@ class Isam2Backend : public Backend {
   double deltaMax(int v) const;
   /// Every variable relinearized at the current estimate (Δ = 0) and the tree recomputed.
   void relinearizeAllAtEstimate();
-  /// χ² of the graph and the internal gauge prior at the estimate (under guardSteps their
-  /// objective, Factor::objective).
+  /// The objective (Factor::objective) of the graph and the internal gauge prior at the
+  /// estimate: their χ² where every factor is least squares.
   double costWithGauge() const;
   /// optimize()'s full steps from cost `previous` (updated): true when one gains less than
   /// relativeTolerance of the cost; false when one goes uphill (reverted to θ; `uphill` set,
@@ -183,12 +186,13 @@ class Isam2Backend : public Backend {
   void recordBeforeStep(int v);
   /// Cuts back a step that raised the objective (guardSteps); see Isam2Options.
   void guardStep();
-  /// optimize()'s fallback under guardSteps, where Gauss–Newton went uphill: each robust
-  /// factor's re-weighting is held as at the estimate (Factor::heldAt), Levenberg–Marquardt
-  /// minimises that least-squares majorizer, and the objective is read again, until it gains
-  /// less than finalRelativeTolerance, fails to fall (the estimate stays) or `budget`
-  /// iterations are used. `previous` is the objective at the estimate (updated).
-  void heldDescent(int budget, double& previous, int& iterations);
+  /// optimize()'s fallback where Gauss–Newton went uphill and some factor re-weights its
+  /// residual (Factor::heldAt): each such factor is held as at the estimate,
+  /// Levenberg–Marquardt minimises that least-squares majorizer, and the objective is read
+  /// again, until it gains less than finalRelativeTolerance, fails to fall (the estimate
+  /// stays) or `budget` iterations are used. `previous` is the objective at the estimate
+  /// (updated). Returns false, doing nothing, if no factor is held (least squares: plain LM).
+  bool heldDescent(int budget, double& previous, int& iterations);
   /// Variables the batch fallbacks hold fixed: those no factor touches.
   std::vector<char> fixedForBatch() const;
   /// Σ objective of guardFactors_, the stepped variables read from `stepped` (null: the

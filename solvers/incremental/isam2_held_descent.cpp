@@ -1,5 +1,5 @@
-// optimize()'s fallback under Isam2Options::guardSteps (heldDescent), where a full Gauss–
-// Newton step went uphill. The plain fallback, Levenberg–Marquardt on the whole graph,
+// optimize()'s fallback (heldDescent) where a full Gauss–Newton step went uphill and some
+// factor re-weights its residual. The plain fallback, Levenberg–Marquardt on the whole graph,
 // minimises rᵀr; a max-mixture's rᵀr falls to ~0 for a closure pushed past its switch point,
 // so that fallback can end with true closures rejected wholesale (three robots on
 // parking-garage + 100 wrong closures: every closure between them). This one minimises the
@@ -27,14 +27,15 @@ std::vector<char> Isam2Backend::fixedForBatch() const {
   return fixed;
 }
 
-void Isam2Backend::heldDescent(int budget, double& previous, int& iterations) {
+bool Isam2Backend::heldDescent(int budget, double& previous, int& iterations) {
   FactorGraph held;
   std::vector<double> weights, heldBefore;
   held.reserve(static_cast<size_t>(graph_.size()) + 1);
   weights.reserve(static_cast<size_t>(graph_.size()) + 1);
   std::array<const double*, kMaxFactorKeys> x{};
   double lambda = OptimizerOptions{}.initialLambda;
-  const std::vector<char> fixed = fixedForBatch();
+  std::vector<char> fixed;
+  bool anyHeld = false;
   while (iterations < budget) {
     held.factors().clear();
     heldBefore.swap(weights);
@@ -44,11 +45,15 @@ void Isam2Backend::heldDescent(int budget, double& previous, int& iterations) {
         x[static_cast<size_t>(k)] = estimate_.data(estimate_.slot(f->key(k)));
       FactorPtr inner;
       double w = 1.0;
-      held.add(f->heldAt(x.data(), inner, w) ? inner : f);
+      const bool isHeld = f->heldAt(x.data(), inner, w);
+      anyHeld = anyHeld || isHeld;
+      held.add(isHeld ? inner : f);
       weights.push_back(w);
     };
     for (const FactorPtr& f : graph_.factors()) add(f);
     if (gaugeFactor_ >= 0) add(factors_[gaugeFactor_]);
+    if (!anyHeld) return false;  // least squares: the caller's plain LM minimises the objective
+    if (fixed.empty()) fixed = fixedForBatch();
     OptimizerOptions o;
     o.method = OptimizerMethod::LevenbergMarquardt;
     o.maxIterations = std::min(kHeldSolveIterations, budget - iterations);
@@ -61,13 +66,15 @@ void Isam2Backend::heldDescent(int budget, double& previous, int& iterations) {
     const double current = costWithGauge();
     if (!(current < previous)) {
       estimate_ = before;
-      return;
+      return true;
     }
     const double gain = previous - current;
     previous = current;
     const bool settled = weights == heldBefore;  // every factor held as in the last solve
-    if (gain <= isam_.finalRelativeTolerance * current + 1e-14 || (settled && r.converged)) return;
+    if (gain <= isam_.finalRelativeTolerance * current + 1e-14 || (settled && r.converged))
+      return true;
   }
+  return true;
 }
 
 }  // namespace loopd

@@ -211,7 +211,21 @@ TEST(RobustFactors, MaxMixtureObjectiveIsTheBetterComponentsCost) {
   }
 }
 
-// heldAt (isam2's fallback under guardSteps minimises the held least squares): the component
+// Where a held factor's bound is checked: points around the fixture's values, near and far,
+// and where pose 1 agrees with the measurement (χ² = 0).
+std::vector<Values> pointsAround(const Fixture2D& fx) {
+  std::vector<Values> ys;
+  for (double step : {-2.0, -0.7, -0.05, 0.05, 0.3, 1.0, 3.0}) {
+    ys.push_back(fx.values);
+    const double d[3] = {step, -0.5 * step, 0.3 * step};
+    ys.back().retract(1, d);
+  }
+  ys.push_back(fx.values);
+  ys.back().set(1, fx.values.se2(0) * static_cast<const BetweenFactorSE2&>(*fx.between).measured());
+  return ys;
+}
+
+// heldAt (isam2's optimize() falls back to minimising the held least squares): the component
 // chosen at x, as its inner factor at weight 1 or 1/σ₀², bounds the objective from above up to
 // a constant and touches it at x, on both sides of the switch point. Least squares hold nothing.
 TEST(RobustFactors, MaxMixtureHeldAtBoundsItsObjectiveFromAbove) {
@@ -226,17 +240,8 @@ TEST(RobustFactors, MaxMixtureHeldAtBoundsItsObjectiveFromAbove) {
     const bool null = fx.between->chi2(fx.values) > m->switchChi2();
     EXPECT_EQ(w, null ? 1.0 / (1.6e7 * 1.6e7) : 1.0) << noise;
     const double k = objectiveAt(*m, fx.values) - w * fx.between->chi2(fx.values);
-    // Points around x, and where pose 1 agrees with the measurement (χ² = 0).
-    std::vector<Values> ys;
-    for (double step : {-2.0, -0.7, -0.05, 0.05, 0.3, 1.0, 3.0}) {
-      ys.push_back(fx.values);
-      const double d[3] = {step, -0.5 * step, 0.3 * step};
-      ys.back().retract(1, d);
-    }
-    ys.push_back(fx.values);
-    ys.back().set(1, fx.values.se2(0) * static_cast<const BetweenFactorSE2&>(*inner).measured());
     int crossed = 0;
-    for (const Values& y : ys) {
+    for (const Values& y : pointsAround(fx)) {
       const double c = fx.between->chi2(y);
       crossed += (c > m->switchChi2()) != null;
       EXPECT_LE(objectiveAt(*m, y), w * c + k + 1e-9 * (1.0 + c)) << noise << " at χ² " << c;
@@ -248,6 +253,31 @@ TEST(RobustFactors, MaxMixtureHeldAtBoundsItsObjectiveFromAbove) {
   Fixture2D fx(1.0);
   std::vector<const double*> x{fx.values.data(0), fx.values.data(1)};
   EXPECT_FALSE(fx.between->heldAt(x.data(), inner, w));
+}
+
+// A kernel held at x (its IRLS weight ρ'(χ²) there) bounds ρ from above up to a constant and
+// touches it at x, for every kernel: ρ is concave in χ², on each side of the kernels' bends.
+TEST(RobustFactors, KernelHeldAtBoundsItsObjectiveFromAbove) {
+  for (KernelType kernel :
+       {KernelType::Huber, KernelType::Cauchy, KernelType::GemanMcClure, KernelType::DCS}) {
+    for (double noise : {0.01, 1.0, 30.0}) {
+      Fixture2D fx(noise);
+      const auto k = KernelFactor::make(fx.between, kernel);
+      std::vector<const double*> x{fx.values.data(0), fx.values.data(1)};
+      FactorPtr inner;
+      double w = 0.0;
+      ASSERT_TRUE(k->heldAt(x.data(), inner, w));
+      EXPECT_EQ(inner, fx.between);
+      const double c0 = fx.between->chi2(fx.values);
+      EXPECT_EQ(w, kernelWeight(kernel, c0, k->parameter()));
+      const double offset = objectiveAt(*k, fx.values) - w * c0;
+      for (const Values& y : pointsAround(fx)) {
+        const double c = fx.between->chi2(y);
+        EXPECT_LE(objectiveAt(*k, y), w * c + offset + 1e-9 * (1.0 + c))
+            << kernelName(kernel) << " " << noise << " at χ² " << c;
+      }
+    }
+  }
 }
 
 TEST(RobustFactors, WeightedAndGraduatedJacobians) {
