@@ -276,6 +276,20 @@ TEST(EngineRounds, RobustSolversInThreeRobotsJoinFramesAtTheClosuresRealNoise) {
             trueRejected(mmOneRobot, noisy, clean.edges.size()) + 10);
 }
 
+// `file` + 100 wrong closures (mode, seed) queued as `robots` interleaved robots under `solver`,
+// in rounds of 100 poses: at most maxTrue true closures, and maxRejected in all, rejected.
+void expectRejectsAtMost(const std::string& file, tools::OutlierMode mode, int seed,
+                         const std::string& solver, int robots, size_t maxTrue,
+                         size_t maxRejected) {
+  const io::Dataset clean = io::readDataset(testing_live::kData + "/" + file);
+  const io::Dataset noisy = withWrongClosures(clean, 100, mode, seed);
+  const Replay r = queuedAtOnce(noisy, 100, solver, robots, robots > 1);
+  EXPECT_LE(trueRejected(r, noisy, clean.edges.size()), maxTrue)
+      << file << " seed " << seed << ", " << robots << " robots";
+  EXPECT_LE(r.rejected.size(), maxRejected)
+      << file << " seed " << seed << ", " << robots << " robots";
+}
+
 // mm took each update's whole Gauss–Newton step. parking-garage + 100 random wrong closures,
 // seed 2, as three interleaved robots: 3113 rejected, 3015 of them true (one robot: 98).
 // Stepped pose by pose, a wrong closure some 9 m and 2.5 rad off came in under mm's switch
@@ -285,15 +299,8 @@ TEST(EngineRounds, RobustSolversInThreeRobotsJoinFramesAtTheClosuresRealNoise) {
 // iSAM2 now cuts back a step that raises the mixture's cost (Isam2Options::guardSteps): the
 // wrong closures alone are rejected.
 TEST(EngineRounds, MmCutsBackAStepThatWouldDropTrueClosures) {
-  const io::Dataset clean = io::readDataset(testing_live::kData + "/parking-garage.g2o");
-  const io::Dataset seed2 = withWrongClosures(clean, 100, tools::OutlierMode::Random, 2);
-  const Replay threeRobots = queuedAtOnce(seed2, 100, "mm", 3, true);
-  EXPECT_EQ(trueRejected(threeRobots, seed2, clean.edges.size()), 0u);
-  EXPECT_LE(threeRobots.rejected.size(), 100u);
-  const io::Dataset seed1 = withWrongClosures(clean, 100, tools::OutlierMode::Random, 1);
-  const Replay oneRobot = queuedAtOnce(seed1, 100, "mm");
-  EXPECT_EQ(trueRejected(oneRobot, seed1, clean.edges.size()), 0u);
-  EXPECT_LE(oneRobot.rejected.size(), 100u);
+  expectRejectsAtMost("parking-garage.g2o", tools::OutlierMode::Random, 2, "mm", 3, 0, 100);
+  expectRejectsAtMost("parking-garage.g2o", tools::OutlierMode::Random, 1, "mm", 1, 0, 100);
 }
 
 // sphere2500 + 100 wrong closures in groups of 10 (seed 1) as three interleaved robots: the
@@ -302,11 +309,7 @@ TEST(EngineRounds, MmCutsBackAStepThatWouldDropTrueClosures) {
 // of them true (one robot: 51). It now descends Σρ: 108, the 8 true ones dcs rejects on this
 // file without outliers too.
 TEST(EngineRounds, DcsInThreeRobotsDescendsItsObjectiveOnSphereGroups) {
-  const io::Dataset clean = io::readDataset(testing_live::kData + "/sphere2500.g2o");
-  const io::Dataset noisy = withWrongClosures(clean, 100, tools::OutlierMode::Group, 1);
-  const Replay dcs = queuedAtOnce(noisy, 100, "dcs", 3, true);
-  EXPECT_LE(trueRejected(dcs, noisy, clean.edges.size()), 8u);
-  EXPECT_LE(dcs.rejected.size(), 108u);
+  expectRejectsAtMost("sphere2500.g2o", tools::OutlierMode::Group, 1, "dcs", 3, 8, 108);
 }
 
 // parking-garage + 1000 random wrong closures (seed 1) as three robots: two wrong closures
