@@ -248,7 +248,7 @@ void MaxMixtureFactor::evaluate(const double* const* x, double* r, double* const
   inner_->evaluate(x, r, J);
   double c = 0.0;
   for (int k = 0; k < dim(); ++k) c += r[k] * r[k];
-  if (c > switchChi2_ || !std::isfinite(c)) scaleBlocks(*this, size(), 1.0 / nullSigma_, r, J);
+  if (nullWins(c)) scaleBlocks(*this, size(), 1.0 / nullSigma_, r, J);
 }
 
 std::unique_ptr<Factor> MaxMixtureFactor::clone() const {
@@ -259,7 +259,7 @@ std::unique_ptr<Factor> MaxMixtureFactor::clone() const {
 
 double MaxMixtureFactor::objective(const double* const* x) const {
   const double c = inner_->chi2(x);
-  if (c <= switchChi2_) return c;
+  if (!nullWins(c)) return c;
   const double s2 = nullSigma_ * nullSigma_;
   return c / s2 + switchChi2_ * (1.0 - 1.0 / s2);  // the null's normaliser, as in the ctor
 }
@@ -267,13 +267,12 @@ double MaxMixtureFactor::objective(const double* const* x) const {
 bool MaxMixtureFactor::heldAt(const double* const* x, FactorPtr& inner, double& weight) const {
   const double c = inner_->chi2(x);
   inner = inner_;
-  weight = c > switchChi2_ || !std::isfinite(c) ? 1.0 / (nullSigma_ * nullSigma_) : 1.0;
+  weight = nullWins(c) ? 1.0 / (nullSigma_ * nullSigma_) : 1.0;
   return true;
 }
 
 bool MaxMixtureFactor::nullChosenAt(const Values& values) const {
-  const double c = chi2At(*inner_, values);
-  return c > switchChi2_ || !std::isfinite(c);
+  return nullWins(chi2At(*inner_, values));
 }
 
 // --- WeightedFactor, GraduatedFactor ------------------------------------------------------

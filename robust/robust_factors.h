@@ -14,6 +14,7 @@
 //                           normaliser) chosen at each evaluation.
 //   WeightedFactor          fixed weight: √w·r, √w·J.
 //   GraduatedFactor         riSAM's SIG kernel at a fixed μ, IRLS like KernelFactor.
+#include <cmath>
 #include <memory>
 
 #include "solvers/factors/factor.h"
@@ -130,6 +131,10 @@ class MaxMixtureFactor final : public Factor {
  private:
   FactorPtr inner_;
   double nullWeight_, nullSigma_, switchChi2_;
+
+  /// The null component is the better one at this inner χ² (past the switch point, or not
+  /// finite): the one rule evaluate(), objective(), heldAt() and nullChosenAt() follow.
+  bool nullWins(double chi2) const { return chi2 > switchChi2_ || !std::isfinite(chi2); }
 };
 
 class WeightedFactor final : public Factor {

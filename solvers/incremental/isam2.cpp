@@ -272,6 +272,13 @@ void Isam2Backend::settle(int maxSteps, double relativeGain) {
   fullSteps(maxSteps, relativeGain, previous, iterations);
 }
 
+std::vector<char> Isam2Backend::fixedForBatch() const {
+  std::vector<char> fixed(static_cast<size_t>(estimate_.size()), 0);
+  for (int v = 0; v < estimate_.size(); ++v)
+    fixed[static_cast<size_t>(v)] = varFactors_[v].empty() ? 1 : 0;
+  return fixed;
+}
+
 void Isam2Backend::optimize() {
   if (factors_.empty()) return;
   summary_ = {};

@@ -20,13 +20,6 @@ namespace {
 constexpr int kHeldSolveIterations = 10;
 }  // namespace
 
-std::vector<char> Isam2Backend::fixedForBatch() const {
-  std::vector<char> fixed(static_cast<size_t>(estimate_.size()), 0);
-  for (int v = 0; v < estimate_.size(); ++v)
-    fixed[static_cast<size_t>(v)] = varFactors_[v].empty() ? 1 : 0;
-  return fixed;
-}
-
 bool Isam2Backend::heldDescent(int budget, double& previous, int& iterations) {
   FactorGraph held;
   std::vector<double> weights, heldBefore;
