@@ -333,6 +333,7 @@ void GncBackend::Run::report() {
   s.initialChi2 = initialChi2_;
   s.finalChi2 = last_.finalChi2;
   s.converged = last_.converged;
+  s.budgetSpent = false;  // the schedule ended (or its outer budget did): a new one starts over
   s.stopReason = reason_;
 }
 

@@ -74,8 +74,11 @@ namespace loopd::server {
 
 struct EngineOptions {
   std::string solver = "lm";
-  int publishEvery = 50;             // full estimate snapshot every N updates (0 = never)
-  double idleSeconds = 0.5;          // input pause before optimize() + converged publish
+  int publishEvery = 50;     // full estimate snapshot every N updates (0 = never)
+  double idleSeconds = 0.5;  // input pause before optimize() + converged publish
+  // optimize() calls per input pause at most: one that spends its iteration budget still
+  // descending (SolveSummary::budgetSpent) is resumed at the next idle(), publishing each time.
+  int idleRounds = 10;
   int holdMaxBatches = 1000;         // held batches at most (oldest expire first)
   double holdSeconds = 30.0;         // a held batch expires after this long
   double priorInformation = 1e8;     // first-pose and root-anchor priors
@@ -132,6 +135,9 @@ class Engine : private GraphView {
   bool step();
   /// Housekeeping without input: expire holds, idle optimize, heartbeat.
   void idle();
+  /// Nothing left for an idle optimize to do (the status's `converged`): no input since the
+  /// last one, and that one did not stop on its budget with rounds left (idleRounds).
+  bool settled() const { return !dirty_; }
   /// The engine thread's loop; returns once stop is set and the queue is drained.
   void run(const std::atomic<bool>& stop);
 
@@ -398,7 +404,9 @@ class Engine : private GraphView {
   std::int64_t updateSeq_ = 0;  // from the start time in µs (Engine::Engine)
   std::int64_t updatesSinceSnapshot_ = 0;
   double lastUpdateMs_ = 0.0, sumUpdateMs_ = 0.0;
-  bool dirty_ = false;                       // updated since the last optimize()
+  bool dirty_ = false;  // updated since the last optimize(), or that one is to be resumed
+  int idleRound_ = 0;   // optimize() calls in this input pause (the one begun at pauseOf_)
+  std::chrono::steady_clock::time_point pauseOf_;
   const std::atomic<bool>* stop_ = nullptr;  // run()'s stop flag, while it runs
   bool replaying_ = false;
   std::chrono::steady_clock::time_point lastInput_, lastStatus_;

@@ -55,6 +55,7 @@ int runServer(const ServerConfig& cfg, const std::atomic<bool>& stop) {
   eo.holdSeconds = cfg.holdSeconds;
   eo.holdMaxBatches = cfg.holdMax;
   eo.idleSeconds = cfg.idleSeconds;
+  eo.idleRounds = cfg.idleRounds;
   eo.maxHypotheses = cfg.maxHypotheses;
   eo.posesPerUpdate = cfg.posesPerUpdate;
   eo.joinAgreement = cfg.joinAgreement;

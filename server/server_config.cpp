@@ -28,13 +28,15 @@ std::string trim(const std::string& s) {
 const char* const kKeys[] = {
     "lcm-url",        "solver",           "channel-prefix",     "journal",        "resume",
     "publish-every",  "log-level",        "hold-seconds",       "hold-max",       "idle-seconds",
-    "max-hypotheses", "poses-per-update", "landmark-namespace", "join-agreement", "config"};
+    "max-hypotheses", "poses-per-update", "landmark-namespace", "join-agreement", "idle-rounds",
+    "config"};
 
 // The ranges of the numeric flags (serverUsage() and README name them).
 constexpr int kMaxCount = 1000000;       // --publish-every, --hold-max, --poses-per-update
 constexpr double kMaxSeconds = 86400.0;  // --hold-seconds, --idle-seconds: a day
 constexpr int kMaxHypotheses = 1000;     // --max-hypotheses (as loopd-solve's)
 constexpr int kMaxAgreement = 1000;      // --join-agreement
+constexpr int kMaxIdleRounds = 1000;     // --idle-rounds
 
 bool knownKey(const std::string& k) {
   for (const char* x : kKeys)
@@ -97,6 +99,8 @@ void apply(ServerConfig& c, const std::string& k, const std::string& v) {
     c.holdMax = toInt(k, v, 0, kMaxCount);
   else if (k == "idle-seconds")
     c.idleSeconds = toDouble(k, v, 0, kMaxSeconds);
+  else if (k == "idle-rounds")
+    c.idleRounds = toInt(k, v, 1, kMaxIdleRounds);
   else if (k == "max-hypotheses")
     c.maxHypotheses = toInt(k, v, 1, kMaxHypotheses);
   else if (k == "poses-per-update")
@@ -205,6 +209,8 @@ std::string serverUsage() {
          "  --hold-max N          at most N held batches, 0-1000000 (default 1000)\n"
          "  --idle-seconds S      input pause before iterating to convergence, 0-86400 (default "
          "0.5)\n"
+         "  --idle-rounds N       optimize() calls per pause at most: one that stops on its\n"
+         "                        iteration budget is resumed, 1-1000 (default 10)\n"
          "  --max-hypotheses K    mh: live hypotheses kept at most, 1-1000 (default 10)\n"
          "  --poses-per-update N  batches queued while solving are applied together, at most\n"
          "                        N new poses of one robot per update, 0-1000000 (default\n"

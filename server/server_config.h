@@ -19,6 +19,7 @@ struct ServerConfig {
   double holdSeconds = 30.0;
   int holdMax = 1000;
   double idleSeconds = 0.5;
+  int idleRounds = 10;                         // EngineOptions::idleRounds
   int maxHypotheses = 10;                      // mh: live hypotheses at most (K)
   int posesPerUpdate = 100;                    // EngineOptions::posesPerUpdate
   int joinAgreement = 2;                       // EngineOptions::joinAgreement

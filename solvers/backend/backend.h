@@ -52,6 +52,9 @@ struct SolveSummary {
   double initialChi2 = 0.0;
   double finalChi2 = 0.0;
   bool converged = false;
+  /// Stopped because the iteration budget ran out, still descending: another optimize() goes
+  /// on from here (the server's idle optimize resumes it, EngineOptions::idleRounds).
+  bool budgetSpent = false;
   std::string stopReason;
 };
 

@@ -90,6 +90,7 @@ void BatchBackend::optimize() {
   summary_.initialChi2 = r.initialChi2;
   summary_.finalChi2 = r.finalChi2;
   summary_.converged = r.converged;
+  summary_.budgetSpent = r.budgetSpent;
   summary_.stopReason = r.stopReason;
 }
 

@@ -175,7 +175,10 @@ const char* NonlinearOptimizer::acceptStep(Values& values, const Values& trialVa
 namespace {
 
 OptimizerResult& finish(OptimizerResult& result, const LinearizationCost& cost) {
-  if (result.stopReason.empty()) result.stopReason = "iteration limit";
+  if (result.stopReason.empty()) {
+    result.stopReason = "iteration limit";
+    result.budgetSpent = true;
+  }
   result.finalChi2 = cost.chi2;
   result.finalWeightedCost = cost.weighted;
   return result;

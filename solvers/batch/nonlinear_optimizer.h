@@ -48,6 +48,7 @@ struct OptimizerResult {
   double finalWeightedCost = 0.0;
   bool converged = false;
   double finalTrustParameter = 0.0;  // LM: λ at exit (a warm start for the next solve)
+  bool budgetSpent = false;          // stopped on maxIterations, not on a test
   std::string stopReason;
 };
 

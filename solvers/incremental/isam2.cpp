@@ -317,6 +317,7 @@ void Isam2Backend::optimize() {
   summary_.iterations = iterations;
   summary_.finalChi2 = graph_.chi2(estimate_);
   summary_.converged = converged;
+  summary_.budgetSpent = !converged && iterations >= budget;
   summary_.stopReason = converged ? (usedBatch ? "converged (after batch LM)" : "converged")
                         : uphill  ? (usedBatch ? "Gauss-Newton step uphill (after batch LM)"
                                                : "Gauss-Newton step uphill")

@@ -576,6 +576,11 @@ TEST(EngineCommands, ServerFlagsRefuseUnknownLogLevelsAndNumbersOutOfRange) {
       EXPECT_THROW(parseServerConfig({flag, v}), std::invalid_argument) << flag << " " << v;
   }
   EXPECT_THROW(parseServerConfig({"--max-hypotheses", "1001"}), std::invalid_argument);
+  for (const std::string v : {"0", "1001", "-1", "nan", "2.5"})
+    EXPECT_THROW(parseServerConfig({"--idle-rounds", v}), std::invalid_argument) << v;
+  EXPECT_EQ(parseServerConfig({}).idleRounds, 10);
+  EXPECT_EQ(parseServerConfig({"--idle-rounds", "1"}).idleRounds, 1);
+  EXPECT_EQ(parseServerConfig({"--idle-rounds", "1000"}).idleRounds, 1000);
   EXPECT_EQ(parseServerConfig({"--max-hypotheses", "1000"}).maxHypotheses, 1000);
   EXPECT_EQ(parseServerConfig({"--hold-max", "1000000"}).holdMax, 1000000);
   EXPECT_EQ(parseServerConfig({"--publish-every", "0"}).publishEvery, 0);

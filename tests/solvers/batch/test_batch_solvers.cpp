@@ -55,6 +55,7 @@ TEST_P(BatchSolverTest, ReachesBestKnownOptimum) {
   backend->update(wholeProblemUpdate(problem));
   const double chi2 = backend->chi2();
   EXPECT_TRUE(backend->summary().converged) << backend->summary().stopReason;
+  EXPECT_FALSE(backend->summary().budgetSpent);
   if (c.bestChi2 > 0.0) {
     EXPECT_LE(chi2, c.bestChi2 * (1.0 + 1e-4)) << c.file;
     // Not below the best known optimum by more than its printed rounding.
@@ -77,6 +78,27 @@ TEST(BatchSolver, FileStartStillReachesOptimumOnEasyData) {
   auto backend = makeBackend("lm", o);
   backend->update(wholeProblemUpdate(problem));
   EXPECT_LE(backend->chi2(), 45.004696 * (1.0 + 1e-4));
+}
+
+// A solve cut short by maxIterations says so (SolveSummary::budgetSpent: the server's pause
+// resumes it); another optimize() goes on from there.
+TEST(BatchSolver, AStopOnTheIterationBudgetIsReportedAndResumable) {
+  const io::Dataset ds = io::readDataset(std::string(LOOPD_DATASETS_DIR) + "/intel.g2o");
+  const PoseGraphProblem problem = buildProblem(ds);
+  for (const std::string solver : {"lm", "gn", "dogleg"}) {
+    BackendOptions o;
+    o.linearInitialization = false;  // the file's start: more than one iteration
+    o.maxIterations = 1;
+    auto backend = makeBackend(solver, o);
+    backend->update(wholeProblemUpdate(problem));
+    EXPECT_TRUE(backend->summary().budgetSpent) << solver;
+    EXPECT_EQ(backend->summary().stopReason, "iteration limit") << solver;
+    const double first = backend->chi2();
+    for (int round = 0; round < 200 && backend->summary().budgetSpent; ++round) backend->optimize();
+    EXPECT_FALSE(backend->summary().budgetSpent) << solver;
+    EXPECT_LT(backend->chi2(), first) << solver;
+    EXPECT_LE(backend->chi2(), 45.004696 * (1.0 + 1e-4)) << solver;
+  }
 }
 
 TEST(BatchSolver, MarginalsAreSymmetricPositiveDefinite) {

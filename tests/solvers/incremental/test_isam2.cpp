@@ -519,12 +519,14 @@ TEST(Isam2, OptimizeTakesAtMostTheIterationsAsked) {
   };
   const auto unlimited = solveWithLimit(100);
   EXPECT_TRUE(unlimited->summary().converged) << unlimited->summary().stopReason;
+  EXPECT_FALSE(unlimited->summary().budgetSpent);
   EXPECT_GT(unlimited->summary().iterations, 12);
   for (int limit : {1, 3, 12}) {
     const auto capped = solveWithLimit(limit);
     EXPECT_LE(capped->summary().iterations, limit);
     EXPECT_GE(capped->summary().iterations, 1);
     EXPECT_FALSE(capped->summary().converged) << limit;
+    EXPECT_TRUE(capped->summary().budgetSpent) << limit;  // the server's pause resumes it
     EXPECT_GT(capped->chi2(), unlimited->chi2()) << limit;
   }
 }
