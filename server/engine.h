@@ -191,6 +191,10 @@ class Engine : private GraphView {
     std::set<FactorId> joiners;       // the agreeing closures the frames were joined at
     std::vector<FactorPtr> closures;  // the pair's judged closures since, single-frame forms
     size_t checkedAt = 0;             // closures.size() at the last check
+    // The pair shares a frame through other robots' joins (no joiners): the placement holds
+    // while the solver keeps most of the pair's largest agreeing set; `placed` is the robot of
+    // the two whose own join rests on fewer closures.
+    bool throughOthers = false;
   };
   struct Decoded {
     std::shared_ptr<const loopd::factor_batch_t> batch;
@@ -318,6 +322,14 @@ class Engine : private GraphView {
   /// transform than the one the frames were joined at, the robots the join placed are moved
   /// there and the solver is rebuilt from the graph at that start (`moved`: every variable).
   void checkJoins(std::vector<Key>& moved);
+  /// The check for a pair whose frames were joined through other robots, as its first closure
+  /// comes in; false if neither robot's placement rests on a join still checked.
+  bool throughOthersCheck(const RobotPair& pair, JoinCheck& check) const;
+  /// The robot of `pair` whose own join rests on fewer closures (joins still checked; a root,
+  /// a settled join or one made at a trusted factor is firm), −1 if both are firm.
+  std::int64_t weakerPlacement(const RobotPair& pair) const;
+  /// How many of `closures` the solver does not reject.
+  size_t solverKeeps(const std::vector<FactorPtr>& closures) const;
   /// Moves the robot `j` placed (its anchor, so everything in its frame), and every robot a
   /// join placed from one that moves (RobotInfo::placedFrom), to where `agree` (closures of
   /// `pair`) puts it, rebuilds the solver there and records `agree` as the join's closures.
@@ -395,6 +407,7 @@ class Engine : private GraphView {
   std::map<RobotPair, std::vector<KeptBack>> pending_;  // sightings waiting for a join
   std::map<RobotPair, std::vector<KeptBack>> pendingClosures_;  // closures waiting for agreement
   std::map<RobotPair, JoinCheck> joinChecks_;  // joins made at agreeing closures, still checked
+  std::set<RobotPair> settledJoins_;           // checks that ended with their placement holding
   bool regroupNeeded_ = false;
 
   std::vector<Staged> staged_;

@@ -97,6 +97,7 @@ void Engine::regroup(std::vector<Key>& moved) {
   // the groups of joined robots from the live ones; a group left without a root prior gets one
   // (at its current value) on its lowest robot.
   regroupNeeded_ = false;
+  settledJoins_.clear();  // pairs may now share a frame through other robots than before
   const std::map<std::uint32_t, std::uint32_t> groups =
       frameGroupsOf(interEdges_, ownerTiesAt(nullptr));
   std::map<std::uint32_t, std::uint32_t> parent;  // anchored robot → its group's root

@@ -438,7 +438,11 @@ void Engine::commit(Staged& s) {
   }
   for (auto& [pair, check] : s.joinsMade) joinChecks_[pair] = std::move(check);
   for (const FactorPtr& f : s.pairClosures) {
-    const auto it = joinChecks_.find(std::minmax(keyRobot(f->key(0)), keyRobot(f->key(1))));
+    const RobotPair pair = std::minmax(keyRobot(f->key(0)), keyRobot(f->key(1)));
+    auto it = joinChecks_.find(pair);
+    JoinCheck check;
+    if (it == joinChecks_.end() && !settledJoins_.count(pair) && throughOthersCheck(pair, check))
+      it = joinChecks_.emplace(pair, std::move(check)).first;
     if (it != joinChecks_.end()) it->second.closures.push_back(f);
   }
   for (const Group& g : s.groups) groups_[g.factor.id] = g;

@@ -121,6 +121,7 @@ void Engine::resetAll() {
   pending_.clear();
   pendingClosures_.clear();
   joinChecks_.clear();
+  settledJoins_.clear();
   staged_.clear();
   stagedValues_ = Values();
   holds_.clear();
