@@ -77,6 +77,11 @@ void Engine::checkJoins(std::vector<Key>& moved) {
       holds = std::any_of(agree.begin(), agree.end(),
                           [&](const FactorPtr& f) { return j.joiners.count(f->id()) > 0; });
     }
+    spdlog::debug("join check, robots {} and {}{}: {} of {} closures agree, {}{}", pair.first,
+                  pair.second, j.throughOthers ? " (through others)" : "", agree.size(),
+                  j.closures.size(), holds ? "holding the placement" : "against the placement",
+                  j.throughOthers ? fmt::format(", the solver keeps {} of the rest", keptRest)
+                                  : std::string());
     if (holds || static_cast<int>(largest.size()) < opt_.joinAgreement) {
       if (holds && j.closures.size() >= kJoinSettledClosures) {
         settledJoins_.insert(pair);
