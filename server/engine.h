@@ -191,6 +191,7 @@ class Engine : private GraphView {
     std::set<FactorId> joiners;       // the agreeing closures the frames were joined at
     std::vector<FactorPtr> closures;  // the pair's judged closures since, single-frame forms
     size_t checkedAt = 0;             // closures.size() at the last check
+    size_t pauseCheckedAt = 0;        // closures.size() at the last check at an input pause
     // The pair shares a frame through other robots' joins (no joiners): the placement holds
     // while the solver keeps most of the pair's largest agreeing set; `placed` is the robot of
     // the two whose own join rests on fewer closures.
@@ -321,7 +322,9 @@ class Engine : private GraphView {
   /// kJoinCheckGrowth (engine_join_check.cpp): when a larger set of them agrees on another
   /// transform than the one the frames were joined at, the robots the join placed are moved
   /// there and the solver is rebuilt from the graph at that start (`moved`: every variable).
-  void checkJoins(std::vector<Key>& moved);
+  /// `atPause`: the input paused and the idle optimize settled; every pair whose closures
+  /// changed since its last check at a pause is checked, whatever their growth.
+  void checkJoins(std::vector<Key>& moved, bool atPause = false);
   /// The check for a pair whose frames were joined through other robots, as its first closure
   /// comes in; false if neither robot's placement rests on a join still checked.
   bool throughOthersCheck(const RobotPair& pair, JoinCheck& check) const;

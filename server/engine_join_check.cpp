@@ -42,7 +42,7 @@ constexpr size_t kRejoinMargin = 2;
 
 }  // namespace
 
-void Engine::checkJoins(std::vector<Key>& moved) {
+void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
   for (auto it = joinChecks_.begin(); it != joinChecks_.end();) {
     const RobotPair pair = it->first;
     JoinCheck& j = it->second;
@@ -53,12 +53,14 @@ void Engine::checkJoins(std::vector<Key>& moved) {
     j.closures.erase(std::remove_if(j.closures.begin(), j.closures.end(),
                                     [&](const FactorPtr& f) { return !live_.count(f->id()); }),
                      j.closures.end());
-    if (j.closures.size() <= j.joiners.size() ||
-        static_cast<double>(j.closures.size()) < kJoinCheckGrowth * j.checkedAt) {
+    const bool due = atPause
+                         ? j.closures.size() != j.pauseCheckedAt
+                         : static_cast<double>(j.closures.size()) >= kJoinCheckGrowth * j.checkedAt;
+    if (j.closures.size() <= j.joiners.size() || !due) {
       ++it;
       continue;
     }
-    j.checkedAt = j.closures.size();
+    (atPause ? j.pauseCheckedAt : j.checkedAt) = j.closures.size();
     const PairMaps maps = pairMaps(pair, nullptr);
     const std::vector<size_t> largest = agreeingPairClosures(maps, j.closures);
     std::vector<char> inLargest(j.closures.size(), 0);
@@ -118,6 +120,10 @@ void Engine::checkJoins(std::vector<Key>& moved) {
       if (rejoin(pair, j, agree)) {
         const std::vector<Key> all = backend_->estimate().keys();
         moved.insert(moved.end(), all.begin(), all.end());
+        // The rebuilt solver has not judged anything yet: the other pairs wait for their next
+        // check, and every pair is due again at the next pause.
+        for (auto& [p, check] : joinChecks_) check.pauseCheckedAt = 0;
+        return;
       }
     }
     ++it;
