@@ -193,8 +193,8 @@ class Engine : private GraphView {
     size_t checkedAt = 0;             // closures.size() at the last check
     size_t pauseCheckedAt = 0;        // closures.size() at the last check at an input pause
     // The pair shares a frame through other robots' joins (no joiners): the placement holds
-    // while the solver keeps most of the pair's largest agreeing set; `placed` is the robot of
-    // the two whose own join rests on fewer closures.
+    // while the solver keeps most of the pair's largest agreeing set; `placed` is chosen when
+    // it moves, as the robot of the two whose own join rests on fewer closures.
     bool throughOthers = false;
   };
   struct Decoded {
@@ -325,14 +325,9 @@ class Engine : private GraphView {
   /// `atPause`: the input paused and the idle optimize settled; every pair whose closures
   /// changed since its last check at a pause is checked, whatever their growth.
   void checkJoins(std::vector<Key>& moved, bool atPause = false);
-  /// The check for a pair whose frames were joined through other robots, as its first closure
-  /// comes in; false if neither robot's placement rests on a join still checked.
-  bool throughOthersCheck(const RobotPair& pair, JoinCheck& check) const;
   /// The robot of `pair` whose own join rests on fewer closures (joins still checked; a root,
   /// a settled join or one made at a trusted factor is firm), −1 if both are firm.
   std::int64_t weakerPlacement(const RobotPair& pair) const;
-  /// How many of `closures` the solver does not reject.
-  size_t solverKeeps(const std::vector<FactorPtr>& closures) const;
   /// Moves the robot `j` placed (its anchor, so everything in its frame), and every robot a
   /// join placed from one that moves (RobotInfo::placedFrom), to where `agree` (closures of
   /// `pair`) puts it, rebuilds the solver there and records `agree` as the join's closures.

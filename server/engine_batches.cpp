@@ -440,9 +440,13 @@ void Engine::commit(Staged& s) {
   for (const FactorPtr& f : s.pairClosures) {
     const RobotPair pair = std::minmax(keyRobot(f->key(0)), keyRobot(f->key(1)));
     auto it = joinChecks_.find(pair);
-    JoinCheck check;
-    if (it == joinChecks_.end() && !settledJoins_.count(pair) && throughOthersCheck(pair, check))
+    // Joined through other robots: checked from its first closure, if a placement it could
+    // move still rests on a checked join.
+    if (it == joinChecks_.end() && !settledJoins_.count(pair) && weakerPlacement(pair) >= 0) {
+      JoinCheck check;
+      check.throughOthers = true;
       it = joinChecks_.emplace(pair, std::move(check)).first;
+    }
     if (it != joinChecks_.end()) it->second.closures.push_back(f);
   }
   for (const Group& g : s.groups) groups_[g.factor.id] = g;

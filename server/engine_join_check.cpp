@@ -73,8 +73,15 @@ void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
     size_t keptRest = 0;
     bool holds = false;
     if (j.throughOthers) {
-      holds = 2 * solverKeeps(agree) >= agree.size();
-      keptRest = solverKeeps(rest);
+      const std::vector<FactorId> ids = backend_->rejected();
+      const std::set<FactorId> rejected(ids.begin(), ids.end());
+      auto kept = [&](const std::vector<FactorPtr>& closures) {
+        return static_cast<size_t>(
+            std::count_if(closures.begin(), closures.end(),
+                          [&](const FactorPtr& f) { return rejected.count(f->id()) == 0; }));
+      };
+      holds = 2 * kept(agree) >= agree.size();
+      keptRest = kept(rest);
     } else {
       holds = std::any_of(agree.begin(), agree.end(),
                           [&](const FactorPtr& f) { return j.joiners.count(f->id()) > 0; });
@@ -130,15 +137,6 @@ void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
   }
 }
 
-bool Engine::throughOthersCheck(const RobotPair& pair, JoinCheck& check) const {
-  if (!shareFrame(pair.first, pair.second)) return false;
-  const std::int64_t placed = weakerPlacement(pair);
-  if (placed < 0) return false;
-  check.placed = static_cast<std::uint32_t>(placed);
-  check.throughOthers = true;
-  return true;
-}
-
 std::int64_t Engine::weakerPlacement(const RobotPair& pair) const {
   // How many closures a robot's placement rests on: its join's, while that is still checked;
   // a root, a settled join or one made at a trusted factor is firm.
@@ -154,14 +152,6 @@ std::int64_t Engine::weakerPlacement(const RobotPair& pair) const {
   const size_t first = support(pair.first), second = support(pair.second);
   if (first == SIZE_MAX && second == SIZE_MAX) return -1;
   return first <= second ? pair.first : pair.second;
-}
-
-size_t Engine::solverKeeps(const std::vector<FactorPtr>& closures) const {
-  const std::vector<FactorId> ids = backend_->rejected();
-  const std::set<FactorId> rejected(ids.begin(), ids.end());
-  size_t kept = 0;
-  for (const FactorPtr& f : closures) kept += rejected.count(f->id()) == 0;
-  return kept;
 }
 
 bool Engine::rejoin(const RobotPair& pair, JoinCheck& j, const std::vector<FactorPtr>& agree) {
