@@ -309,11 +309,15 @@ class Engine : private GraphView {
   /// odometry and poses, each in its frame, and the noise scale of their own closures.
   struct PairMaps {
     std::vector<FactorPtr> odometry;
+    std::vector<FactorPtr> ownClosures;  // each within one robot; those the solver rejects out
     Values poses;
     double closureScale = 1.0;
   };
   /// The pair's maps with the staged rounds (and `building`) applied.
   PairMaps pairMaps(const RobotPair& pair, const Staged* building) const;
+  /// `maps` with each robot's map relaxed on its own odometry and loop closures alone
+  /// (own_map_relaxation.h), and the closures' noise scale read there.
+  static PairMaps relaxedPairMaps(PairMaps maps);
   /// Indices into `closures` (single-frame inter-robot closures of the pair) of the largest
   /// set that agrees on the transform between the pair's frames, at `maps`.
   std::vector<size_t> agreeingPairClosures(const PairMaps& maps,
@@ -325,6 +329,18 @@ class Engine : private GraphView {
   /// `atPause`: the input paused and the idle optimize settled; every pair whose closures
   /// changed since its last check at a pause is checked, whatever their growth.
   void checkJoins(std::vector<Key>& moved, bool atPause = false);
+  /// One check of a join at one pair of maps: the largest agreeing set of the pair's closures,
+  /// whether it holds the placement, and whether the frames move there.
+  struct JoinVerdict {
+    std::vector<FactorPtr> agree;
+    size_t restLargest = 0;  // the largest set among the others (only when it may move)
+    bool holds = false;
+    bool moves = false;
+  };
+  /// `rejected`: the solver's rejected factors; `relaxed`: `maps` are relaxedPairMaps (the
+  /// debug log says so).
+  JoinVerdict judgeJoin(const RobotPair& pair, const JoinCheck& j, const PairMaps& maps,
+                        const std::set<FactorId>& rejected, bool relaxed) const;
   /// The robot of `pair` whose own join rests on fewer closures (joins still checked; a root,
   /// a settled join or one made at a trusted factor is firm), −1 if both are firm.
   std::int64_t weakerPlacement(const RobotPair& pair) const;

@@ -11,6 +11,7 @@
 
 #include "server/closure_agreement.h"
 #include "server/engine.h"
+#include "server/own_map_relaxation.h"
 #include "server/wire_factors.h"
 #include "solvers/factors/between_factor_se2.h"
 #include "solvers/factors/between_factor_se3.h"
@@ -98,7 +99,6 @@ Engine::PairMaps Engine::pairMaps(const RobotPair& pair, const Staged* building)
   // The two robots' odometry and own loop closures (committed but those the solver rejects,
   // staged, `building`'s) and poses, each in its frame.
   PairMaps maps;
-  std::vector<FactorPtr> ownClosures;
   auto take = [&](const FactorPtr& f) {
     if (f->size() != 2 || !inPair(f->key(0)) || keyKind(f->key(1)) != KeyKind::Pose ||
         keyRobot(f->key(1)) != keyRobot(f->key(0)))
@@ -106,7 +106,7 @@ Engine::PairMaps Engine::pairMaps(const RobotPair& pair, const Staged* building)
     if (f->role() == FactorRole::Odometry)
       maps.odometry.push_back(f);
     else if (f->role() == FactorRole::LoopClosure)
-      ownClosures.push_back(f);
+      maps.ownClosures.push_back(f);
   };
   const std::vector<FactorId> rejectedIds = backend_->rejected();
   const std::set<FactorId> rejected(rejectedIds.begin(), rejectedIds.end());
@@ -119,7 +119,15 @@ Engine::PairMaps Engine::pairMaps(const RobotPair& pair, const Staged* building)
   for (const Values* v : {&backend_->estimate(), static_cast<const Values*>(&stagedValues_)})
     for (int s = 0; s < v->size(); ++s)
       if (inPair(v->key(s))) maps.poses.insertFrom(*v, s);
-  maps.closureScale = ownClosureNoiseScale(ownClosures, maps.odometry, maps.poses);
+  maps.closureScale = ownClosureNoiseScale(maps.ownClosures, maps.odometry, maps.poses);
+  return maps;
+}
+
+Engine::PairMaps Engine::relaxedPairMaps(PairMaps maps) {
+  std::vector<FactorPtr> own = maps.odometry;
+  own.insert(own.end(), maps.ownClosures.begin(), maps.ownClosures.end());
+  relaxOwnMaps(own, maps.poses, kRelaxIterations);
+  maps.closureScale = ownClosureNoiseScale(maps.ownClosures, maps.odometry, maps.poses);
   return maps;
 }
 

@@ -14,6 +14,10 @@
 // judged against robot 2's wrong place (mm rejected 68). Such a pair is checked too, its
 // placement held while the solver keeps most of its largest agreeing set; when it does not,
 // the robot of the two whose own join rests on fewer closures moves.
+//
+// A wrong join bends the maps it joins, and on them a pair's true closures can split into
+// small agreeing sets; where the solver's maps do not hold a placement, it is judged again on
+// each robot's map relaxed on its own factors (own_map_relaxation.h).
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -61,38 +65,21 @@ void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
       continue;
     }
     (atPause ? j.pauseCheckedAt : j.checkedAt) = j.closures.size();
+    const std::vector<FactorId> ids = backend_->rejected();
+    const std::set<FactorId> rejected(ids.begin(), ids.end());
     const PairMaps maps = pairMaps(pair, nullptr);
-    const std::vector<size_t> largest = agreeingPairClosures(maps, j.closures);
-    std::vector<char> inLargest(j.closures.size(), 0);
-    for (size_t i : largest) inLargest[i] = 1;
-    std::vector<FactorPtr> rest, agree;
-    for (size_t i = 0; i < j.closures.size(); ++i)
-      (inLargest[i] ? agree : rest).push_back(j.closures[i]);
-    // Through others there are no joining closures: the placement holds while the solver keeps
-    // most of the largest set, and the closures it keeps elsewhere count for it.
-    size_t keptRest = 0;
-    bool holds = false;
-    if (j.throughOthers) {
-      const std::vector<FactorId> ids = backend_->rejected();
-      const std::set<FactorId> rejected(ids.begin(), ids.end());
-      auto kept = [&](const std::vector<FactorPtr>& closures) {
-        return static_cast<size_t>(
-            std::count_if(closures.begin(), closures.end(),
-                          [&](const FactorPtr& f) { return rejected.count(f->id()) == 0; }));
-      };
-      holds = 2 * kept(agree) >= agree.size();
-      keptRest = kept(rest);
-    } else {
-      holds = std::any_of(agree.begin(), agree.end(),
-                          [&](const FactorPtr& f) { return j.joiners.count(f->id()) > 0; });
+    JoinVerdict v = judgeJoin(pair, j, maps, rejected, false);
+    if (!v.holds && !v.moves) {
+      // The solver's maps carry the join being checked: a wrong one bends them, and the pair's
+      // true closures then split into small sets that agree (sphere2500 in two robots: sets of
+      // at most 6 of 50, none holding the placement). Each robot's map relaxed on its own
+      // factors loses that bend, but also what true joins mended in it: read where the
+      // solver's maps do not hold the placement.
+      JoinVerdict r = judgeJoin(pair, j, relaxedPairMaps(maps), rejected, true);
+      if (r.moves) v = std::move(r);
     }
-    spdlog::debug("join check, robots {} and {}{}: {} of {} closures agree, {}{}", pair.first,
-                  pair.second, j.throughOthers ? " (through others)" : "", agree.size(),
-                  j.closures.size(), holds ? "holding the placement" : "against the placement",
-                  j.throughOthers ? fmt::format(", the solver keeps {} of the rest", keptRest)
-                                  : std::string());
-    if (holds || static_cast<int>(largest.size()) < opt_.joinAgreement) {
-      if (holds && j.closures.size() >= kJoinSettledClosures) {
+    if (!v.moves) {
+      if (v.holds && j.closures.size() >= kJoinSettledClosures) {
         settledJoins_.insert(pair);
         it = joinChecks_.erase(it);  // its placement stays in RobotInfo::placedFrom
       } else {
@@ -100,41 +87,75 @@ void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
       }
       continue;
     }
-    // The joining closures' own set is among the rest: the largest set there bounds it.
-    const size_t restLargest = agreeingPairClosures(maps, rest).size();
-    if (agree.size() > kRejoinMargin * std::max(restLargest, keptRest)) {
-      if (j.throughOthers) {
-        // The weaker placement now: joins may have moved since the check began.
-        const std::int64_t placed = weakerPlacement(pair);
-        if (placed < 0) {
-          ++it;
-          continue;
-        }
-        j.placed = static_cast<std::uint32_t>(placed);
-        spdlog::warn(
-            "robots {} and {} (their frames joined through other robots): {} of their {} loop "
-            "closures agree on a transform between their frames that the solver rejects (at "
-            "most {} agree on another); moving the frames there and rebuilding the solver",
-            pair.first, pair.second, agree.size(), j.closures.size(), restLargest);
-      } else {
-        spdlog::warn(
-            "robots {} and {}: {} of their {} loop closures agree on another transform between "
-            "their frames than the {} they were joined at (at most {} agree with those); moving "
-            "the frames there and rebuilding the solver",
-            pair.first, pair.second, agree.size(), j.closures.size(), j.joiners.size(),
-            restLargest);
+    if (j.throughOthers) {
+      // The weaker placement now: joins may have moved since the check began.
+      const std::int64_t placed = weakerPlacement(pair);
+      if (placed < 0) {
+        ++it;
+        continue;
       }
-      if (rejoin(pair, j, agree)) {
-        const std::vector<Key> all = backend_->estimate().keys();
-        moved.insert(moved.end(), all.begin(), all.end());
-        // The rebuilt solver has not judged anything yet: the other pairs wait for their next
-        // check, and every pair is due again at the next pause.
-        for (auto& [p, check] : joinChecks_) check.pauseCheckedAt = 0;
-        return;
-      }
+      j.placed = static_cast<std::uint32_t>(placed);
+      spdlog::warn(
+          "robots {} and {} (their frames joined through other robots): {} of their {} loop "
+          "closures agree on a transform between their frames that the solver rejects (at "
+          "most {} agree on another); moving the frames there and rebuilding the solver",
+          pair.first, pair.second, v.agree.size(), j.closures.size(), v.restLargest);
+    } else {
+      spdlog::warn(
+          "robots {} and {}: {} of their {} loop closures agree on another transform between "
+          "their frames than the {} they were joined at (at most {} agree with those); moving "
+          "the frames there and rebuilding the solver",
+          pair.first, pair.second, v.agree.size(), j.closures.size(), j.joiners.size(),
+          v.restLargest);
+    }
+    if (rejoin(pair, j, v.agree)) {
+      const std::vector<Key> all = backend_->estimate().keys();
+      moved.insert(moved.end(), all.begin(), all.end());
+      // The rebuilt solver has not judged anything yet: the other pairs wait for their next
+      // check, and every pair is due again at the next pause.
+      for (auto& [p, check] : joinChecks_) check.pauseCheckedAt = 0;
+      return;
     }
     ++it;
   }
+}
+
+Engine::JoinVerdict Engine::judgeJoin(const RobotPair& pair, const JoinCheck& j,
+                                      const PairMaps& maps, const std::set<FactorId>& rejected,
+                                      bool relaxed) const {
+  JoinVerdict v;
+  const std::vector<size_t> largest = agreeingPairClosures(maps, j.closures);
+  std::vector<char> inLargest(j.closures.size(), 0);
+  for (size_t i : largest) inLargest[i] = 1;
+  std::vector<FactorPtr> rest;
+  for (size_t i = 0; i < j.closures.size(); ++i)
+    (inLargest[i] ? v.agree : rest).push_back(j.closures[i]);
+  // Through others there are no joining closures: the placement holds while the solver keeps
+  // most of the largest set, and the closures it keeps elsewhere count for it.
+  size_t keptRest = 0;
+  if (j.throughOthers) {
+    auto kept = [&](const std::vector<FactorPtr>& closures) {
+      return static_cast<size_t>(
+          std::count_if(closures.begin(), closures.end(),
+                        [&](const FactorPtr& f) { return rejected.count(f->id()) == 0; }));
+    };
+    v.holds = 2 * kept(v.agree) >= v.agree.size();
+    keptRest = kept(rest);
+  } else {
+    v.holds = std::any_of(v.agree.begin(), v.agree.end(),
+                          [&](const FactorPtr& f) { return j.joiners.count(f->id()) > 0; });
+  }
+  spdlog::debug(
+      "join check, robots {} and {}{}: {} of {} closures agree{}, {}{}", pair.first, pair.second,
+      j.throughOthers ? " (through others)" : "", v.agree.size(), j.closures.size(),
+      relaxed ? " on the relaxed maps" : "",
+      v.holds ? "holding the placement" : "against the placement",
+      j.throughOthers ? fmt::format(", the solver keeps {} of the rest", keptRest) : std::string());
+  if (v.holds || static_cast<int>(largest.size()) < opt_.joinAgreement) return v;
+  // The joining closures' own set is among the rest: the largest set there bounds it.
+  v.restLargest = agreeingPairClosures(maps, rest).size();
+  v.moves = v.agree.size() > kRejoinMargin * std::max(v.restLargest, keptRest);
+  return v;
 }
 
 std::int64_t Engine::weakerPlacement(const RobotPair& pair) const {

@@ -1,0 +1,49 @@
+#include "server/own_map_relaxation.h"
+
+#include <numeric>
+
+#include "solvers/batch/nonlinear_optimizer.h"
+#include "solvers/graph/factor_graph.h"
+
+namespace loopd::server {
+
+namespace {
+int findRoot(std::vector<int>& parent, int s) {
+  while (parent[s] != s) s = parent[s] = parent[parent[s]];
+  return s;
+}
+}  // namespace
+
+void relaxOwnMaps(const std::vector<FactorPtr>& factors, Values& poses, int maxIterations) {
+  FactorGraph graph;
+  std::vector<int> parent(static_cast<size_t>(poses.size()));
+  std::iota(parent.begin(), parent.end(), 0);
+  for (const FactorPtr& f : factors) {
+    const int a = poses.slot(f->key(0)), b = poses.slot(f->key(1));
+    if (a < 0 || b < 0) continue;
+    graph.add(f);
+    parent[findRoot(parent, a)] = findRoot(parent, b);
+  }
+  if (graph.empty()) return;
+  // The gauge: the lowest key of each connected part is held where it is.
+  std::vector<int> lowest(parent.size(), -1);
+  for (int s = 0; s < poses.size(); ++s) {
+    int& l = lowest[findRoot(parent, s)];
+    if (l < 0 || poses.key(s) < poses.key(l)) l = s;
+  }
+  std::vector<char> fixed(parent.size(), 0);
+  for (int l : lowest)
+    if (l >= 0) fixed[l] = 1;
+  OptimizerOptions options;
+  options.maxIterations = maxIterations;
+  Values relaxed = poses;
+  try {
+    NonlinearOptimizer lm(graph, relaxed, fixed, options);
+    lm.optimize(relaxed);
+  } catch (const std::exception&) {
+    return;
+  }
+  if (relaxed.allFinite()) poses.assignFrom(relaxed);
+}
+
+}  // namespace loopd::server
