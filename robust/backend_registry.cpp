@@ -115,6 +115,7 @@ std::vector<Entry>& registry() {
          RisamOptions r;
          if (o.robustParameter > 0.0) r.shape = o.robustParameter;
          r.interrupt = o.interrupt;
+         r.stopping = o.stopping;
          Isam2Options isam;
          isam.urgentRelinearizeThreshold = 1.0;
          return std::make_unique<RisamBackend>(robustInner(o, isam), r);

@@ -77,14 +77,18 @@ void RisamBackend::tryGncLook() {
   atTail_ = false;
   Answer before = answer();
   std::unique_ptr<GncBackend> gnc;
+  const bool mustFinish =
+      options_.looksGivenUpAtMost > 0 && looksGivenUpInARow_ >= options_.looksGivenUpAtMost;
   try {
-    gnc = solveBatchGnc(options_.interrupt);
+    gnc = solveBatchGnc(mustFinish ? options_.stopping : options_.interrupt);
   } catch (const GncInterrupted&) {
     // Nothing was changed yet; the look is due again at the next optimize().
     ++gncLooksInterrupted_;
+    ++looksGivenUpInARow_;
     atTail_ = tight_;
     return;
   }
+  looksGivenUpInARow_ = 0;
   gncLookAtCount_ = graduated_.size();
   ++gncLooks_;
   bool kept = false;

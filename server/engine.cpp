@@ -5,11 +5,11 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <cmath>
 
 #include "loopd/error_t.hpp"
 #include "server/frame_groups.h"
 #include "server/wire_factors.h"
+#include "solvers/backend/moved_keys.h"
 
 namespace loopd::server {
 
@@ -37,7 +37,10 @@ BackendOptions Engine::backendOptions() const {
   bo.linearInitialization = false;
   // Long optimize() work that can be given up (risam's GNC look at a pause) yields to input
   // and to a stop.
-  bo.interrupt = [this] { return queueDepth() > 0 || (stop_ && stop_->load()); };
+  bo.interrupt = [this] { return queueDepth() > 0 || stopping(); };
+  // A look that has given way too often (RisamOptions::looksGivenUpAtMost) runs to its end
+  // while input waits in the queue, and still yields to a stop.
+  bo.stopping = [this] { return stopping(); };
   return bo;
 }
 
@@ -243,48 +246,43 @@ void Engine::idle() {
     }
     recoverIfDiverged("an idle optimize", &before);
     const double sec = std::chrono::duration<double>(Clock::now() - t0).count();
-    // Input that arrived meanwhile may have made the backend give work up (interrupt: risam's
-    // GNC look); the graph is then not settled, and the next pause optimizes again even if the
-    // input was only a command. An optimize() that spent its budget still descending goes on
-    // at the next idle(), up to idleRounds per pause: a quiet server shows the optimum, not
-    // where 100 iterations reached (dcs on sphere2500 in two robots: 255 rejected, 203 given
-    // 377 iterations).
-    if (pauseOf_ != lastInput_) {
-      pauseOf_ = lastInput_;
-      idleRound_ = 0;
-    }
-    const bool budgetSpent = backend_->summary().budgetSpent;
-    const bool resume = budgetSpent && ++idleRound_ < opt_.idleRounds;
-    if (resume)
-      spdlog::debug("idle optimize: stopped on its iteration budget; round {} follows",
-                    idleRound_ + 1);
-    else if (budgetSpent)
-      spdlog::warn("idle optimize: still descending after {} rounds; resumed at the next input",
-                   idleRound_);
-    dirty_ = queueDepth() > 0 || resume;
-    // Settled: the joins are checked again on the settled maps. At a round's own check its new
-    // poses, composed from odometry, can bend the maps so that one revisit's true closures
-    // split into small agreeing sets (sphere2500 at full speed, three robots).
-    if (!dirty_ && !joinChecks_.empty()) {
-      std::vector<Key> rejoined;
-      checkJoins(rejoined, true);
-      dirty_ = !rejoined.empty() && ++idleRound_ < opt_.idleRounds;  // a move counts as a round
-    }
-    std::vector<Key> moved;
-    const Values& after = backend_->estimate();
-    for (int s = 0; s < after.size(); ++s) {
-      const int o = before.slot(after.key(s));
-      bool m = o < 0;
-      for (int i = 0; !m && i < kValueStride; ++i)
-        m = std::abs(after.data(s)[i] - before.data(o)[i]) > 1e-9;
-      if (m) moved.push_back(after.key(s));
-    }
+    dirty_ = pauseGoesOn();
+    const std::vector<Key> moved = movedKeys(before, backend_->estimate(), 1e-9);
     spdlog::debug("idle optimize: {:.1f} ms, {} variables moved, chi2 {:.9g}", sec * 1e3,
                   moved.size(), backend_->chi2());
     afterUpdate(moved, sec, true);
   }
   if (std::chrono::duration<double>(Clock::now() - lastStatus_).count() >= opt_.heartbeatSeconds)
     publishStatus(0, false);
+}
+
+bool Engine::pauseGoesOn() {
+  if (pauseOf_ != lastInput_) {
+    pauseOf_ = lastInput_;
+    idleRound_ = 0;
+  }
+  // Input that arrived meanwhile may have made the backend give work up (interrupt: risam's
+  // GNC look); the graph is then not settled, and the next pause optimizes again even if the
+  // input was only a command. An optimize() that spent its budget still descending goes on
+  // at the next idle(), up to idleRounds per pause: a quiet server shows the optimum, not
+  // where 100 iterations reached (dcs on sphere2500 in two robots: 255 rejected, 203 given
+  // 377 iterations).
+  const bool budgetSpent = backend_->summary().budgetSpent;
+  const bool resume = budgetSpent && ++idleRound_ < opt_.idleRounds;
+  if (resume)
+    spdlog::debug("idle optimize: stopped on its iteration budget; round {} follows",
+                  idleRound_ + 1);
+  else if (budgetSpent)
+    spdlog::warn("idle optimize: still descending after {} rounds; resumed at the next input",
+                 idleRound_);
+  if (queueDepth() > 0 || resume) return true;
+  // Settled: the joins are checked again on the settled maps. At a round's own check its new
+  // poses, composed from odometry, can bend the maps so that one revisit's true closures
+  // split into small agreeing sets (sphere2500 at full speed, three robots).
+  if (joinChecks_.empty()) return false;
+  std::vector<Key> rejoined;
+  checkJoins(rejoined, true);
+  return !rejoined.empty() && ++idleRound_ < opt_.idleRounds;  // a move counts as a round
 }
 
 void Engine::run(const std::atomic<bool>& stop) {

@@ -385,6 +385,10 @@ class Engine : private GraphView {
   /// the sane rest, and returns true (engine_divergence.cpp). If that rebuild diverges too,
   /// it is logged and the backend stays as it is.
   bool recoverIfDiverged(const char* what, const Values* lastGood);
+  /// After a pause's optimize(): whether the pause goes on (dirty_ stays set). Input waiting,
+  /// an optimize() that spent its budget with rounds left (idleRounds), or, once settled, a
+  /// join moved by checkJoins at the pause (a round too).
+  bool pauseGoesOn();
   /// The rebuild itself; throws if the new backend diverges too.
   void recoverFromDivergence(const Values* lastGood);
   /// Gives a new backend the whole graph (mh: plain factors, optimize, then the groups).
@@ -435,6 +439,7 @@ class Engine : private GraphView {
   int idleRound_ = 0;   // optimize() calls in this input pause (the one begun at pauseOf_)
   std::chrono::steady_clock::time_point pauseOf_;
   const std::atomic<bool>* stop_ = nullptr;  // run()'s stop flag, while it runs
+  bool stopping() const { return stop_ && stop_->load(); }
   bool replaying_ = false;
   std::chrono::steady_clock::time_point lastInput_, lastStatus_;
   mutable std::mutex countersMu_;

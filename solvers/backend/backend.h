@@ -74,6 +74,10 @@ struct BackendOptions {
   /// only `risam`'s GNC look, RisamOptions::interrupt); true gives it up, and the answer stays
   /// as it was before that work. The server: input is waiting, or it is stopping.
   std::function<bool()> interrupt;
+  /// Asked instead of `interrupt` by such work once it has given way too often to give way
+  /// to input again (RisamOptions::looksGivenUpAtMost): true only for a stop. The server: it
+  /// is stopping.
+  std::function<bool()> stopping;
 };
 
 class Backend {

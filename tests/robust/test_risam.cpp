@@ -595,6 +595,49 @@ TEST(RisamFinal, AnInterruptedLookLeavesTheAnswerAndLooksAgain) {
   EXPECT_LT(clean.graph.chi2(b->estimate()), 1.01 * optimum);
 }
 
+// The same run under input that never pauses for as long as a look takes (the interrupt always
+// true): three looks in a row are given up, and the fourth asks only `stopping` and runs to its
+// end, at the optimum. Before, every look gave way, however many pauses came.
+TEST(RisamFinal, ALookGivenUpThreeTimesInARowRunsToItsEnd) {
+  const PoseGraphProblem p = withOutliers("intel.g2o", 1000, tools::OutlierMode::Group, 1, 500);
+  const PoseGraphProblem clean = buildProblem(test::loadPrefix("intel.g2o:500"));
+  int stopAsked = 0;
+  RisamOptions o;
+  o.interrupt = [] { return true; };
+  o.stopping = [&] {
+    ++stopAsked;
+    return false;
+  };
+  const std::unique_ptr<RisamBackend> b = makeRisam(o);
+  runOnline(p, b.get());
+  b->optimize();
+  b->optimize();
+  EXPECT_EQ(b->gncLooksInterrupted(), 3);
+  EXPECT_EQ(b->looksGivenUpInARow(), 3);
+  EXPECT_EQ(b->gncLooks(), 0);
+  EXPECT_EQ(stopAsked, 0);
+  b->optimize();
+  EXPECT_EQ(b->gncLooks(), 1);
+  EXPECT_EQ(b->gncLooksInterrupted(), 3);
+  EXPECT_EQ(b->looksGivenUpInARow(), 0);
+  EXPECT_GE(stopAsked, 1);
+  EXPECT_LT(clean.graph.chi2(b->estimate()), 1.01 * leastSquaresOptimum(clean));
+}
+
+// A stop still ends a look that must run to its end: `stopping` gives it up like `interrupt`.
+TEST(RisamFinal, AStopEndsALookThatMustRunToItsEnd) {
+  const PoseGraphProblem p = withOutliers("intel.g2o", 1000, tools::OutlierMode::Group, 1, 500);
+  RisamOptions o;
+  o.looksGivenUpAtMost = 1;
+  o.interrupt = [] { return true; };
+  o.stopping = [] { return true; };
+  const std::unique_ptr<RisamBackend> b = makeRisam(o);
+  runOnline(p, b.get());
+  b->optimize();
+  EXPECT_EQ(b->gncLooksInterrupted(), 2);
+  EXPECT_EQ(b->gncLooks(), 0);
+}
+
 // parking-garage without outliers: the tightened gate fails a few true closures, the tail
 // none, so the answer rejects nothing and optimize() takes no second looks (they cost a fifth
 // of the online time there when they were triggered at the gate).

@@ -40,22 +40,46 @@ struct Replay {
   SolveSummary pauseEnd;           // how the last of them stopped
 };
 
-// A dataset's batches (one per pose, as loopd-feed sends them) queued before the engine
-// looks: a log replayed at full speed into a busy server. Then the input pause's optimize.
+// How a replay is fed: as `robots` robots (interleaved when more than one, as loopd-feed
+// --interleave sends them), to an engine with these join agreement and idle rounds.
 // `stepEvery` > 0: the engine takes what has queued after every that many batches, so that
 // rounds end where the sender happens to be, as a busy server's do.
+struct Feeding {
+  int robots = 1;
+  int joinAgreement = server::EngineOptions{}.joinAgreement;
+  int idleRounds = server::EngineOptions{}.idleRounds;
+  size_t stepEvery = 0;
+  Feeding& agreeing(int n) {
+    joinAgreement = n;
+    return *this;
+  }
+  Feeding& pausing(int rounds) {
+    idleRounds = rounds;
+    return *this;
+  }
+  Feeding& steppedEvery(size_t batches) {
+    stepEvery = batches;
+    return *this;
+  }
+};
+Feeding interleaved(int robots) {
+  Feeding f;
+  f.robots = robots;
+  return f;
+}
+
+// A dataset's batches (one per pose, as loopd-feed sends them) queued before the engine
+// looks: a log replayed at full speed into a busy server. Then the input pause's optimize.
 Replay queuedAtOnce(const io::Dataset& ds, int posesPerUpdate, const std::string& solver,
-                    int robots = 1, bool interleave = false,
-                    int joinAgreement = server::EngineOptions{}.joinAgreement,
-                    int idleRounds = server::EngineOptions{}.idleRounds, size_t stepEvery = 0) {
-  const tools::FeedOrder feed(ds, -1, robots, interleave);
+                    const Feeding& f = {}) {
+  const tools::FeedOrder feed(ds, -1, f.robots, f.robots > 1);
   std::vector<std::vector<const io::Edge*>> due(feed.poses().size());
   for (const io::Edge& e : ds.edges) due.at(static_cast<size_t>(feed.dueAt(e))).push_back(&e);
   server::EngineOptions o = EngineHarness::options(solver);
   o.posesPerUpdate = posesPerUpdate;
-  o.joinAgreement = joinAgreement;
+  o.joinAgreement = f.joinAgreement;
   o.idleSeconds = 0.0;
-  o.idleRounds = idleRounds;
+  o.idleRounds = f.idleRounds;
   EngineHarness h(o, nullptr);
   client::FactorPublisher pub(
       [&](const std::string&, const std::vector<std::uint8_t>& b) {
@@ -65,9 +89,13 @@ Replay queuedAtOnce(const io::Dataset& ds, int posesPerUpdate, const std::string
   for (size_t i = 0; i < due.size(); ++i) {
     for (const io::Edge* e : due[i]) pub.factor(feed.factor(*e));
     pub.flush();
-    if (stepEvery > 0 && (i + 1) % stepEvery == 0) EXPECT_TRUE(h.engine.step());
+    if (f.stepEvery > 0 && (i + 1) % f.stepEvery == 0) {
+      EXPECT_TRUE(h.engine.step());
+    }
   }
-  if (stepEvery == 0 || due.size() % stepEvery != 0) EXPECT_TRUE(h.engine.step());
+  if (f.stepEvery == 0 || due.size() % f.stepEvery != 0) {
+    EXPECT_TRUE(h.engine.step());
+  }
   const std::int64_t roundUpdates = h.engine.counters().updates;
   int pauseRounds = 0;
   do {  // the pause: optimize() until one ends unspent, at most idleRounds
@@ -76,18 +104,18 @@ Replay queuedAtOnce(const io::Dataset& ds, int posesPerUpdate, const std::string
   } while (!h.engine.settled());
   EXPECT_TRUE(h.out.errors.empty());
   EXPECT_EQ(h.engine.counters().accepted, pub.batchesPublished());
-  Replay r{h.engine.backend().chi2(),
-           h.engine.counters().updates,
-           h.engine.backend().rejected(),
-           {},
-           h.engine.backend().estimate()};
+  Replay r;
+  r.chi2 = h.engine.backend().chi2();
+  r.updates = h.engine.counters().updates;
+  r.rejected = h.engine.backend().rejected();
+  r.estimate = h.engine.backend().estimate();
   const std::set<FactorId> rejected(r.rejected.begin(), r.rejected.end());
-  for (const FactorPtr& f : h.engine.backend().graph().factors()) {
-    if (!f || !rejected.count(f->id())) continue;
+  for (const FactorPtr& factor : h.engine.backend().graph().factors()) {
+    if (!factor || !rejected.count(factor->id())) continue;
     std::vector<std::int64_t> ends;  // pose keys (the anchors of closures between robots left out)
-    for (int k = 0; k < f->size(); ++k)
-      if (keyKind(f->key(k)) == KeyKind::Pose)
-        ends.push_back(static_cast<std::int64_t>(keyIndex(f->key(k))));
+    for (int k = 0; k < factor->size(); ++k)
+      if (keyKind(factor->key(k)) == KeyKind::Pose)
+        ends.push_back(static_cast<std::int64_t>(keyIndex(factor->key(k))));
     if (ends.size() == 2) r.rejectedEnds.insert({ends[0], ends[1]});
   }
   r.rejoins = h.engine.counters().rejoins;
@@ -124,19 +152,18 @@ size_t trueRejected(const Replay& r, const io::Dataset& noisy, size_t cleanEdges
 Replay expectTwoRobotsRejectTheWrongOnly(const std::string& file, int count,
                                          tools::OutlierMode mode, const std::string& solver) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/" + file);
-  const Replay optimum = queuedAtOnce(clean, 100, "lm", 2, true);
-  const Replay r = queuedAtOnce(withWrongClosures(clean, count, mode, 1), 100, solver, 2, true);
+  const Replay optimum = queuedAtOnce(clean, 100, "lm", interleaved(2));
+  const Replay r =
+      queuedAtOnce(withWrongClosures(clean, count, mode, 1), 100, solver, interleaved(2));
   EXPECT_EQ(r.rejected.size(), static_cast<size_t>(count));
   EXPECT_LT(test::largestPositionGap(r.estimate, optimum.estimate), 1e-3);  // metres
   return r;
 }
 
-Replay queuedVictoriaPark(int posesPerUpdate, const std::string& solver = "isam2", int robots = 1,
-                          bool interleave = false,
-                          int idleRounds = server::EngineOptions{}.idleRounds) {
+Replay queuedVictoriaPark(int posesPerUpdate, const std::string& solver = "isam2",
+                          const Feeding& f = {}) {
   const io::Dataset ds = io::readDataset(testing_live::kData + "/victoria_park.txt");
-  return queuedAtOnce(ds, posesPerUpdate, solver, robots, interleave,
-                      server::EngineOptions{}.joinAgreement, idleRounds);
+  return queuedAtOnce(ds, posesPerUpdate, solver, f);
 }
 
 TEST(EngineRounds, AFullSpeedReplayOfVictoriaParkEndsAtTheOptimum) {
@@ -156,7 +183,7 @@ TEST(EngineRounds, AFullSpeedReplayOfVictoriaParkEndsAtTheOptimum) {
 // publishing each round, until one stops unspent (here the third, at 191211: still another
 // basin, see above), at most EngineOptions::idleRounds.
 TEST(EngineRounds, AnIdleOptimizeThatSpendsItsBudgetIsResumed) {
-  const Replay once = queuedVictoriaPark(0, "isam2", 1, false, 1);
+  const Replay once = queuedVictoriaPark(0, "isam2", Feeding().pausing(1));
   EXPECT_EQ(once.pauseRounds, 1);
   EXPECT_TRUE(once.pauseEnd.budgetSpent);
   const Replay resumed = queuedVictoriaPark(0);
@@ -173,7 +200,7 @@ TEST(EngineRounds, AnIdleOptimizeThatSpendsItsBudgetIsResumed) {
 // reads 6.3, not tight; the gate is released (RisamOptions::releaseTightGate) and the answer is
 // one robot's: the same 13 sightings rejected, 6368.34.
 TEST(EngineRounds, VictoriaParkInTwoInterleavedRobotsUnderRisamEndsAsOneRobot) {
-  const Replay r = queuedVictoriaPark(100, "risam", 2, true);
+  const Replay r = queuedVictoriaPark(100, "risam", interleaved(2));
   EXPECT_EQ(r.rejected.size(), 13u);
   EXPECT_NEAR(r.chi2, 6368.34, 0.01);
 }
@@ -215,10 +242,10 @@ TEST(EngineRounds, RisamInTwoRobotsKeepsItsGateWhereWrongJoinsBendTheMaps) {
 TEST(EngineRounds, MmInTwoRobotsJoinsTheFramesWhereClosuresAgree) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/intel.g2o");
   const io::Dataset noisy = withWrongClosures(clean, 100, tools::OutlierMode::Random, 1);
-  const Replay optimum = queuedAtOnce(clean, 100, "lm", 2, true);
+  const Replay optimum = queuedAtOnce(clean, 100, "lm", interleaved(2));
   for (int joinAgreement : {server::EngineOptions{}.joinAgreement, 1}) {
     SCOPED_TRACE(joinAgreement);
-    const Replay r = queuedAtOnce(noisy, 100, "mm", 2, true, joinAgreement);
+    const Replay r = queuedAtOnce(noisy, 100, "mm", interleaved(2).agreeing(joinAgreement));
     EXPECT_EQ(r.rejected.size(), 100u);
     EXPECT_LT(test::largestPositionGap(r.estimate, optimum.estimate), 1e-3);  // metres
   }
@@ -233,10 +260,10 @@ TEST(EngineRounds, MmInTwoRobotsJoinsTheFramesWhereClosuresAgree) {
 TEST(EngineRounds, RobustSolversInThreeRobotsMoveAFrameJoinedAtAWrongGroup) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/intel.g2o");
   const io::Dataset noisy = withWrongClosures(clean, 100, tools::OutlierMode::Group, 2);
-  const Replay optimum = queuedAtOnce(clean, 100, "lm", 3, true);
+  const Replay optimum = queuedAtOnce(clean, 100, "lm", interleaved(3));
   for (const char* solver : {"dcs", "mm"}) {
     SCOPED_TRACE(solver);
-    const Replay r = queuedAtOnce(noisy, 100, solver, 3, true);
+    const Replay r = queuedAtOnce(noisy, 100, solver, interleaved(3));
     EXPECT_EQ(r.rejoins, 1);
     EXPECT_EQ(r.rejected.size(), 100u);
     EXPECT_EQ(trueRejected(r, noisy, clean.edges.size()), 0u);
@@ -251,7 +278,7 @@ Replay expectMmInThreeRobotsMovesAJoin(const std::string& file, tools::OutlierMo
                                        std::uint64_t seed, int posesPerUpdate = 100) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/" + file);
   const io::Dataset noisy = withWrongClosures(clean, 100, mode, seed);
-  const Replay r = queuedAtOnce(noisy, posesPerUpdate, "mm", 3, true);
+  const Replay r = queuedAtOnce(noisy, posesPerUpdate, "mm", interleaved(3));
   EXPECT_GE(r.rejoins, 1);
   EXPECT_LE(r.rejected.size(), 100u);
   EXPECT_EQ(trueRejected(r, noisy, clean.edges.size()), 0u);
@@ -293,7 +320,7 @@ TEST(EngineRounds, MmInThreeRobotsEndsWithoutDroppingTheClosuresBetweenThemInSma
 // no true closure rejected, and all the wrong ones but `keptWrong`.
 void expectDcsInThreeRobotsRejectsTheWrongOnly(const io::Dataset& clean, const io::Dataset& noisy,
                                                size_t keptWrong = 0) {
-  const Replay dcs = queuedAtOnce(noisy, 100, "dcs", 3, true);
+  const Replay dcs = queuedAtOnce(noisy, 100, "dcs", interleaved(3));
   EXPECT_EQ(dcs.rejected.size(), noisy.edges.size() - clean.edges.size() - keptWrong);
   EXPECT_EQ(trueRejected(dcs, noisy, clean.edges.size()), 0u);
 }
@@ -309,7 +336,7 @@ TEST(EngineRounds, RobustSolversInThreeRobotsJoinFramesAtTheClosuresRealNoise) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/parking-garage.g2o");
   const io::Dataset noisy = withWrongClosures(clean, 100, tools::OutlierMode::Random, 1);
   expectDcsInThreeRobotsRejectsTheWrongOnly(clean, noisy);
-  const Replay mm = queuedAtOnce(noisy, 100, "mm", 3, true);
+  const Replay mm = queuedAtOnce(noisy, 100, "mm", interleaved(3));
   const Replay mmOneRobot = queuedAtOnce(noisy, 100, "mm");
   EXPECT_LE(trueRejected(mm, noisy, clean.edges.size()),
             trueRejected(mmOneRobot, noisy, clean.edges.size()) + 10);
@@ -322,7 +349,7 @@ void expectRejectsAtMost(const std::string& file, tools::OutlierMode mode, int s
                          size_t maxRejected) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/" + file);
   const io::Dataset noisy = withWrongClosures(clean, 100, mode, seed);
-  const Replay r = queuedAtOnce(noisy, 100, solver, robots, robots > 1);
+  const Replay r = queuedAtOnce(noisy, 100, solver, interleaved(robots));
   EXPECT_LE(trueRejected(r, noisy, clean.edges.size()), maxTrue)
       << file << " seed " << seed << ", " << robots << " robots";
   EXPECT_LE(r.rejected.size(), maxRejected)
@@ -392,8 +419,7 @@ TEST(EngineRounds, MmInThreeRobotsMovesARobotPlacedWrongThroughAnother) {
 TEST(EngineRounds, JoinsAreCheckedAgainOnTheSettledMapsAtThePause) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/sphere2500.g2o");
   const io::Dataset noisy = withWrongClosures(clean, 100, tools::OutlierMode::Group, 2);
-  const Replay r = queuedAtOnce(noisy, 100, "mm", 3, true, server::EngineOptions{}.joinAgreement,
-                                server::EngineOptions{}.idleRounds, 220);
+  const Replay r = queuedAtOnce(noisy, 100, "mm", interleaved(3).steppedEvery(220));
   EXPECT_EQ(r.rejoins, 2);
   EXPECT_EQ(r.rejected.size(), 100u);
   EXPECT_EQ(trueRejected(r, noisy, clean.edges.size()), 0u);

@@ -401,14 +401,17 @@ TEST(Engine, RefusesARoundThatMakesTheSolverDiverge) {
 struct Yielding {
   static inline std::atomic<int> optimizes{0}, interrupted{0};
   static inline std::atomic<bool> hadInterrupt{false};
+  // BackendOptions::stopping when the interrupt last said yes: a stop, not waiting input.
+  static inline std::atomic<bool> stoppingWhenInterrupted{false};
   static inline std::atomic<bool> waits{true};  // false: optimize() returns at once
 };
 class YieldingBackend : public DecoratorBackend {
  public:
   explicit YieldingBackend(const BackendOptions& o)
       : DecoratorBackend(std::make_unique<Isam2Backend>(), "YieldingBackend"),
-        interrupt_(o.interrupt) {
-    Yielding::hadInterrupt = static_cast<bool>(interrupt_);
+        interrupt_(o.interrupt),
+        stopping_(o.stopping) {
+    Yielding::hadInterrupt = static_cast<bool>(interrupt_) && static_cast<bool>(stopping_);
   }
   std::string name() const override { return "yielding"; }
   UpdateResult update(const BackendUpdate& u) override {
@@ -422,6 +425,7 @@ class YieldingBackend : public DecoratorBackend {
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
     while (std::chrono::steady_clock::now() < until) {
       if (interrupt_ && interrupt_()) {
+        Yielding::stoppingWhenInterrupted = stopping_ && stopping_();
         ++Yielding::interrupted;
         return;
       }
@@ -430,7 +434,7 @@ class YieldingBackend : public DecoratorBackend {
   }
 
  private:
-  std::function<bool()> interrupt_;
+  std::function<bool()> interrupt_, stopping_;
 };
 
 // An engine on "yielding" (registered on first use) that optimizes at every pause.
@@ -452,7 +456,8 @@ struct YieldingEngine {
 
 // The idle optimize gives way: a message that arrives while it runs, or a stop, ends work
 // that asks BackendOptions::interrupt (risam's GNC look at a pause) at once, instead of
-// holding the input back until it is done.
+// holding the input back until it is done; BackendOptions::stopping (asked by a look that has
+// given way too often) tells the stop apart from the input.
 TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
   YieldingEngine y;
   Engine& engine = y.engine;
@@ -477,6 +482,7 @@ TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
   const double waited =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_EQ(Yielding::interrupted, 1);
+  EXPECT_FALSE(Yielding::stoppingWhenInterrupted);  // waiting input is not a stop
   EXPECT_LT(waited, 10.0);
   EXPECT_EQ(engine.queueDepth(), 1);
   ASSERT_TRUE(engine.step());  // the waiting pose goes in
@@ -493,6 +499,7 @@ TEST(Engine, AnIdleOptimizeGivesWayToInputAndToAStop) {
   engine.run(stop);
   stopper.join();
   EXPECT_EQ(Yielding::interrupted, interruptedBefore + 1);
+  EXPECT_TRUE(Yielding::stoppingWhenInterrupted);
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count(), 10.0);
 }
 
