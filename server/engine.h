@@ -310,13 +310,15 @@ class Engine : private GraphView {
   struct PairMaps {
     std::vector<FactorPtr> odometry;
     std::vector<FactorPtr> ownClosures;  // each within one robot; those the solver rejects out
+    std::vector<FactorPtr> rejectedOwnClosures;  // those (committed ones)
     Values poses;
     double closureScale = 1.0;
   };
   /// The pair's maps with the staged rounds (and `building`) applied.
   PairMaps pairMaps(const RobotPair& pair, const Staged* building) const;
   /// `maps` with each robot's map relaxed on its own odometry and loop closures alone
-  /// (own_map_relaxation.h), and the closures' noise scale read there.
+  /// (own_map_relaxation.h): the rejected ones that fit the relaxed maps are taken back and
+  /// the maps relaxed again with them. The closures' noise scale is read there.
   static PairMaps relaxedPairMaps(PairMaps maps);
   /// Indices into `closures` (single-frame inter-robot closures of the pair) of the largest
   /// set that agrees on the transform between the pair's frames, at `maps`.

@@ -99,10 +99,12 @@ Engine::PairMaps Engine::pairMaps(const RobotPair& pair, const Staged* building)
   // The two robots' odometry and own loop closures (committed but those the solver rejects,
   // staged, `building`'s) and poses, each in its frame.
   PairMaps maps;
+  auto withinOneRobot = [&](const FactorPtr& f) {
+    return f->size() == 2 && inPair(f->key(0)) && keyKind(f->key(1)) == KeyKind::Pose &&
+           keyRobot(f->key(1)) == keyRobot(f->key(0));
+  };
   auto take = [&](const FactorPtr& f) {
-    if (f->size() != 2 || !inPair(f->key(0)) || keyKind(f->key(1)) != KeyKind::Pose ||
-        keyRobot(f->key(1)) != keyRobot(f->key(0)))
-      return;
+    if (!withinOneRobot(f)) return;
     if (f->role() == FactorRole::Odometry)
       maps.odometry.push_back(f);
     else if (f->role() == FactorRole::LoopClosure)
@@ -110,8 +112,12 @@ Engine::PairMaps Engine::pairMaps(const RobotPair& pair, const Staged* building)
   };
   const std::vector<FactorId> rejectedIds = backend_->rejected();
   const std::set<FactorId> rejected(rejectedIds.begin(), rejectedIds.end());
-  for (const auto& [id, f] : live_)
-    if (!rejected.count(id)) take(f);
+  for (const auto& [id, f] : live_) {
+    if (!rejected.count(id))
+      take(f);
+    else if (f->role() == FactorRole::LoopClosure && withinOneRobot(f))
+      maps.rejectedOwnClosures.push_back(f);
+  }
   for (const Staged& s : staged_)
     for (const FactorPtr& f : s.update.factors) take(f);
   if (building)
@@ -127,6 +133,12 @@ Engine::PairMaps Engine::relaxedPairMaps(PairMaps maps) {
   std::vector<FactorPtr> own = maps.odometry;
   own.insert(own.end(), maps.ownClosures.begin(), maps.ownClosures.end());
   relaxOwnMaps(own, maps.poses, kRelaxIterations);
+  const std::vector<FactorPtr> back = closuresThatFit(maps.rejectedOwnClosures, maps.poses);
+  if (!back.empty()) {
+    own.insert(own.end(), back.begin(), back.end());
+    maps.ownClosures.insert(maps.ownClosures.end(), back.begin(), back.end());
+    relaxOwnMaps(own, maps.poses, kRelaxIterations);
+  }
   maps.closureScale = ownClosureNoiseScale(maps.ownClosures, maps.odometry, maps.poses);
   return maps;
 }

@@ -2,6 +2,7 @@
 
 #include <numeric>
 
+#include "robust/robust_factors.h"
 #include "solvers/batch/nonlinear_optimizer.h"
 #include "solvers/graph/factor_graph.h"
 
@@ -44,6 +45,17 @@ void relaxOwnMaps(const std::vector<FactorPtr>& factors, Values& poses, int maxI
     return;
   }
   if (relaxed.allFinite()) poses.assignFrom(relaxed);
+}
+
+std::vector<FactorPtr> closuresThatFit(const std::vector<FactorPtr>& closures,
+                                       const Values& poses) {
+  std::vector<FactorPtr> fit;
+  for (const FactorPtr& f : closures) {
+    bool known = true;
+    for (int k = 0; known && k < f->size(); ++k) known = poses.contains(f->key(k));
+    if (known && f->chi2(poses) < chi2Quantile(f->dim(), kFitProbability)) fit.push_back(f);
+  }
+  return fit;
 }
 
 }  // namespace loopd::server

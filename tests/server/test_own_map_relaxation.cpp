@@ -119,5 +119,20 @@ TEST(OwnMapRelaxation, LeavesThePosesAsTheyWereWithoutFactors) {
   for (const Key k : before.keys()) expectSamePose(poses, before, k);
 }
 
+TEST(OwnMapRelaxation, TakesBackTheClosuresThatFitAndNoOthers) {
+  const TwoRobots robots;
+  const Key a = poseKey(3, 0), b = poseKey(3 + kLap, 0);
+  const SE2 z = walk(3).between(walk(3 + kLap));
+  const auto fits = std::make_shared<BetweenFactorSE2>(a, b, z, kInfo, FactorRole::LoopClosure);
+  // 1 m off at σ 0.1 m: χ² 100, above χ²₃(0.999) = 16.3.
+  const auto wrong = std::make_shared<BetweenFactorSE2>(a, b, z * SE2(1.0, 0.0, 0.0), kInfo,
+                                                        FactorRole::LoopClosure);
+  const auto unknown =
+      std::make_shared<BetweenFactorSE2>(a, poseKey(500, 0), z, kInfo, FactorRole::LoopClosure);
+  const std::vector<FactorPtr> back = closuresThatFit({fits, wrong, unknown}, robots.truth);
+  ASSERT_EQ(back.size(), 1u);
+  EXPECT_EQ(back.front(), fits);
+}
+
 }  // namespace
 }  // namespace loopd::server
