@@ -416,13 +416,17 @@ TEST(EngineRounds, MmInThreeRobotsMovesARobotPlacedWrongThroughAnother) {
 // from odometry) bend, they split into small agreeing sets: no join moved, 73 true closures
 // rejected. Checked again once the pause's optimize has settled, the ring agrees and both
 // wrong placements move.
-TEST(EngineRounds, JoinsAreCheckedAgainOnTheSettledMapsAtThePause) {
+void expectMmSteppedInThreeRobotsMovesBoth(size_t stepEvery) {
   const io::Dataset clean = io::readDataset(testing_live::kData + "/sphere2500.g2o");
   const io::Dataset noisy = withWrongClosures(clean, 100, tools::OutlierMode::Group, 2);
-  const Replay r = queuedAtOnce(noisy, 100, "mm", interleaved(3).steppedEvery(220));
-  EXPECT_EQ(r.rejoins, 2);
-  EXPECT_EQ(r.rejected.size(), 100u);
-  EXPECT_EQ(trueRejected(r, noisy, clean.edges.size()), 0u);
+  const Replay r = queuedAtOnce(noisy, 100, "mm", interleaved(3).steppedEvery(stepEvery));
+  EXPECT_EQ(r.rejoins, 2) << "every " << stepEvery << " batches";
+  EXPECT_EQ(r.rejected.size(), 100u) << "every " << stepEvery << " batches";
+  EXPECT_EQ(trueRejected(r, noisy, clean.edges.size()), 0u) << "every " << stepEvery << " batches";
+}
+
+TEST(EngineRounds, JoinsAreCheckedAgainOnTheSettledMapsAtThePause) {
+  expectMmSteppedInThreeRobotsMovesBoth(220);
 }
 
 // The same every 180 batches: robot 1 moved, and robots 1 and 2's closures, judged through
@@ -431,12 +435,7 @@ TEST(EngineRounds, JoinsAreCheckedAgainOnTheSettledMapsAtThePause) {
 // out. Through others the pair is now also read on the relaxed maps, where the rejected own
 // closures that fit again are taken back: 50 of the 70 agree, and robot 2 moves.
 TEST(EngineRounds, APlacementThroughOthersIsReadOnRelaxedMapsToo) {
-  const io::Dataset clean = io::readDataset(testing_live::kData + "/sphere2500.g2o");
-  const io::Dataset noisy = withWrongClosures(clean, 100, tools::OutlierMode::Group, 2);
-  const Replay r = queuedAtOnce(noisy, 100, "mm", interleaved(3).steppedEvery(180));
-  EXPECT_EQ(r.rejoins, 2);
-  EXPECT_EQ(r.rejected.size(), 100u);
-  EXPECT_EQ(trueRejected(r, noisy, clean.edges.size()), 0u);
+  expectMmSteppedInThreeRobotsMovesBoth(180);
 }
 
 // parking-garage + 1000 random wrong closures (seed 1) as three robots: two wrong closures
