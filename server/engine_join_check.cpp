@@ -44,6 +44,8 @@ constexpr size_t kJoinSettledClosures = 200;
 // that may agree with the join: a true join made at the first closures of a revisit is not
 // moved by a wrong group that arrives before the revisit's other closures.
 constexpr size_t kRejoinMargin = 2;
+// How a move's warning says it was read on relaxedPairMaps.
+constexpr const char* kOnRelaxedMaps = ", on the maps relaxed on each robot's own factors,";
 
 }  // namespace
 
@@ -70,6 +72,7 @@ void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
     const std::set<FactorId> rejected(ids.begin(), ids.end());
     const PairMaps maps = pairMaps(pair, nullptr);
     JoinVerdict v = judgeJoin(pair, j, maps, rejected, false);
+    bool onRelaxed = false;
     if ((!v.holds || j.throughOthers) && !v.moves) {
       // The solver's maps carry the join being checked: a wrong one bends them, and the pair's
       // true closures then split into small sets that agree (sphere2500 in two robots: sets of
@@ -79,7 +82,10 @@ void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
       // the closures, through others: it can keep them by bending the maps around a wrong
       // place (sphere2500 in three robots, in rounds of 180 batches: 66 true closures out).
       JoinVerdict r = judgeJoin(pair, j, relaxedPairMaps(maps), rejected, true);
-      if (r.moves) v = std::move(r);
+      if (r.moves) {
+        v = std::move(r);
+        onRelaxed = true;
+      }
     }
     if (!v.moves) {
       if (v.holds && j.closures.size() >= kJoinSettledClosures) {
@@ -100,16 +106,18 @@ void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
       j.placed = static_cast<std::uint32_t>(placed);
       spdlog::warn(
           "robots {} and {} (their frames joined through other robots): {} of their {} loop "
-          "closures agree on a transform between their frames that the solver rejects (at "
-          "most {} agree on another); moving the frames there and rebuilding the solver",
-          pair.first, pair.second, v.agree.size(), j.closures.size(), v.restLargest);
+          "closures agree{} on a transform between their frames{} (at most {} agree on "
+          "another); moving the frames there and rebuilding the solver",
+          pair.first, pair.second, v.agree.size(), j.closures.size(),
+          onRelaxed ? kOnRelaxedMaps : "", onRelaxed ? "" : " that the solver rejects",
+          v.restLargest);
     } else {
       spdlog::warn(
-          "robots {} and {}: {} of their {} loop closures agree on another transform between "
+          "robots {} and {}: {} of their {} loop closures agree{} on another transform between "
           "their frames than the {} they were joined at (at most {} agree with those); moving "
           "the frames there and rebuilding the solver",
-          pair.first, pair.second, v.agree.size(), j.closures.size(), j.joiners.size(),
-          v.restLargest);
+          pair.first, pair.second, v.agree.size(), j.closures.size(),
+          onRelaxed ? kOnRelaxedMaps : "", j.joiners.size(), v.restLargest);
     }
     if (rejoin(pair, j, v.agree)) {
       const std::vector<Key> all = backend_->estimate().keys();
