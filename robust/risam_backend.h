@@ -254,8 +254,9 @@ struct RisamOptions {
   /// After this many looks in a row given up, the next one is asked `stopping` instead of
   /// `interrupt`, and so runs to its end while input waits (nothing is lost: the server
   /// queues it): under input that pauses often but never for as long as a look takes, no
-  /// look would finish, and the answer would stay the online run's, without the GNC's basin
-  /// (intel + 1000 grouped, seed 3: 3.3 m off). 0: always `interrupt`.
+  /// look would finish, and the answer would stay the online run's and the second looks'
+  /// (where the look alone finds the basin, as for intel + 1000 grouped, seed 3, solved with
+  /// one optimize(): 3.3 m off without it). 0: always `interrupt`.
   int looksGivenUpAtMost = 3;
   /// The server sets it (BackendOptions::stopping) to "the server stops". Unset: never.
   std::function<bool()> stopping;
