@@ -314,8 +314,12 @@ class Engine : private GraphView {
     Values poses;
     double closureScale = 1.0;
   };
-  /// The pair's maps with the staged rounds (and `building`) applied.
-  PairMaps pairMaps(const RobotPair& pair, const Staged* building) const;
+  /// The pair's maps with the staged rounds (and `building`) applied; `rejected`: the solver's
+  /// rejected factors (rejectedFactors()), built once by the caller for all its pairs.
+  PairMaps pairMaps(const RobotPair& pair, const Staged* building,
+                    const std::set<FactorId>& rejected) const;
+  /// The factors the solver rejects now, as a set.
+  std::set<FactorId> rejectedFactors() const;
   /// `maps` with each robot's map relaxed on its own odometry and loop closures alone
   /// (own_map_relaxation.h): the rejected ones that fit the relaxed maps are taken back and
   /// the maps relaxed again with them. The closures' noise scale is read there.

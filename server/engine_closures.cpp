@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <optional>
 #include <set>
 
 #include "server/closure_agreement.h"
@@ -65,6 +66,7 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
     list.push_back(c);
     arrived.insert(pair);
   }
+  std::optional<std::set<FactorId>> rejected;  // read once, only if some pair is tested
   for (const RobotPair& pair : arrived) {
     const auto it = pendingClosures_.find(pair);
     if (static_cast<int>(it->second.size()) < opt_.joinAgreement ||
@@ -72,7 +74,8 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
       continue;
     std::vector<FactorPtr> factors;
     for (const KeptBack& c : it->second) factors.push_back(c.factor);
-    const std::vector<size_t> agree = agreeingPairClosures(pairMaps(pair, &st), factors);
+    if (!rejected) rejected = rejectedFactors();
+    const std::vector<size_t> agree = agreeingPairClosures(pairMaps(pair, &st, *rejected), factors);
     if (static_cast<int>(agree.size()) < opt_.joinAgreement) continue;
     const Factor& z = *it->second[agree.front()].factor;
     SE2 m2;
@@ -92,7 +95,13 @@ void Engine::stageInterRobotClosures(const std::vector<KeptBack>& closures, Stag
   releaseJoinedClosures(st);
 }
 
-Engine::PairMaps Engine::pairMaps(const RobotPair& pair, const Staged* building) const {
+std::set<FactorId> Engine::rejectedFactors() const {
+  const std::vector<FactorId> ids = backend_->rejected();
+  return std::set<FactorId>(ids.begin(), ids.end());
+}
+
+Engine::PairMaps Engine::pairMaps(const RobotPair& pair, const Staged* building,
+                                  const std::set<FactorId>& rejected) const {
   auto inPair = [&](Key k) {
     return keyKind(k) == KeyKind::Pose && (keyRobot(k) == pair.first || keyRobot(k) == pair.second);
   };
@@ -110,8 +119,6 @@ Engine::PairMaps Engine::pairMaps(const RobotPair& pair, const Staged* building)
     else if (f->role() == FactorRole::LoopClosure)
       maps.ownClosures.push_back(f);
   };
-  const std::vector<FactorId> rejectedIds = backend_->rejected();
-  const std::set<FactorId> rejected(rejectedIds.begin(), rejectedIds.end());
   for (const auto& [id, f] : live_) {
     if (!rejected.count(id))
       take(f);

@@ -23,6 +23,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <optional>
+#include <set>
 #include <string>
 
 #include "server/engine.h"
@@ -50,6 +52,9 @@ constexpr const char* kOnRelaxedMaps = ", on the maps relaxed on each robot's ow
 }  // namespace
 
 void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
+  // Read once: the solver stays the same until a rejoin, which ends the checks (a failed one
+  // leaves it as it was).
+  std::optional<std::set<FactorId>> rejected;
   for (auto it = joinChecks_.begin(); it != joinChecks_.end();) {
     const RobotPair pair = it->first;
     JoinCheck& j = it->second;
@@ -68,10 +73,9 @@ void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
       continue;
     }
     (atPause ? j.pauseCheckedAt : j.checkedAt) = j.closures.size();
-    const std::vector<FactorId> ids = backend_->rejected();
-    const std::set<FactorId> rejected(ids.begin(), ids.end());
-    const PairMaps maps = pairMaps(pair, nullptr);
-    JoinVerdict v = judgeJoin(pair, j, maps, rejected, false);
+    if (!rejected) rejected = rejectedFactors();
+    const PairMaps maps = pairMaps(pair, nullptr, *rejected);
+    JoinVerdict v = judgeJoin(pair, j, maps, *rejected, false);
     bool onRelaxed = false;
     if ((!v.holds || j.throughOthers) && !v.moves) {
       // The solver's maps carry the join being checked: a wrong one bends them, and the pair's
@@ -81,7 +85,7 @@ void Engine::checkJoins(std::vector<Key>& moved, bool atPause) {
       // solver's maps do not hold the placement, or where holding is only the solver keeping
       // the closures, through others: it can keep them by bending the maps around a wrong
       // place (sphere2500 in three robots, in rounds of 180 batches: 66 true closures out).
-      JoinVerdict r = judgeJoin(pair, j, relaxedPairMaps(maps), rejected, true);
+      JoinVerdict r = judgeJoin(pair, j, relaxedPairMaps(maps), *rejected, true);
       if (r.moves) {
         v = std::move(r);
         onRelaxed = true;
