@@ -1,38 +1,29 @@
 #include "server/own_map_relaxation.h"
 
-#include <numeric>
-
 #include "robust/robust_factors.h"
 #include "solvers/batch/nonlinear_optimizer.h"
+#include "solvers/graph/connected_parts.h"
 #include "solvers/graph/factor_graph.h"
 
 namespace loopd::server {
 
-namespace {
-int findRoot(std::vector<int>& parent, int s) {
-  while (parent[s] != s) s = parent[s] = parent[parent[s]];
-  return s;
-}
-}  // namespace
-
 void relaxOwnMaps(const std::vector<FactorPtr>& factors, Values& poses, int maxIterations) {
   FactorGraph graph;
-  std::vector<int> parent(static_cast<size_t>(poses.size()));
-  std::iota(parent.begin(), parent.end(), 0);
+  ConnectedParts parts(poses.size());
   for (const FactorPtr& f : factors) {
     const int a = poses.slot(f->key(0)), b = poses.slot(f->key(1));
     if (a < 0 || b < 0) continue;
     graph.add(f);
-    parent[findRoot(parent, a)] = findRoot(parent, b);
+    parts.join(a, b);
   }
   if (graph.empty()) return;
   // The gauge: the lowest key of each connected part is held where it is.
-  std::vector<int> lowest(parent.size(), -1);
+  std::vector<int> lowest(static_cast<size_t>(poses.size()), -1);
   for (int s = 0; s < poses.size(); ++s) {
-    int& l = lowest[findRoot(parent, s)];
+    int& l = lowest[parts.part(s)];
     if (l < 0 || poses.key(s) < poses.key(l)) l = s;
   }
-  std::vector<char> fixed(parent.size(), 0);
+  std::vector<char> fixed(lowest.size(), 0);
   for (int l : lowest)
     if (l >= 0) fixed[l] = 1;
   OptimizerOptions options;

@@ -202,6 +202,43 @@ TEST(LoopdSolve, Isam2AtOnceStartsFromTheLinearInitialisation) {
   EXPECT_GT(loopd::tools::jsonNumber(slurp(file), "final_chi2", NAN), 2.0 * optimum);
 }
 
+// A part of the file that no chain of edges ties to the first pose sits anywhere at the same
+// cost: the solve goes on (the rest is as it would be alone), and a warning names the part.
+TEST(LoopdSolve, PartsTiedToNothingAreNamedInAWarning) {
+  const std::string parts = tempFile("untied.g2o",
+                                     "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n"
+                                     "VERTEX_SE2 2 5 5 0\nVERTEX_SE2 3 6 5 0\n"
+                                     "VERTEX_SE2 4 7 5 0\n"
+                                     "EDGE_SE2 0 1 1.1 0 0.1 1 0 0 1 0 1\n"
+                                     "EDGE_SE2 2 3 0.9 0.2 0 1 0 0 1 0 1\n"
+                                     "EDGE_SE2 3 4 1 0 0 1 0 0 1 0 1\n");
+  for (const char* mode : {"", " --incremental"}) {
+    const RunResult r = run(parts + " --solver isam2 --quiet" + mode);
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("warning: " + parts +
+                            ": 3 of 5 variables (pose 2, pose 3, …) are tied to pose 0 by no "
+                            "chain of edges and have no prior"),
+              std::string::npos)
+        << mode << ": " << r.output;
+  }
+  // One pose alone, no edge at all.
+  const std::string lone = tempFile("lone.g2o",
+                                    "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n"
+                                    "VERTEX_SE2 7 5 5 0\n"
+                                    "EDGE_SE2 0 1 1.1 0 0.1 1 0 0 1 0 1\n");
+  const RunResult one = run(lone + " --quiet");
+  EXPECT_NE(one.output.find("1 of 3 variables (pose 7) is tied to pose 0 by no chain of edges and "
+                            "has no prior: its placement relative to pose 0 is arbitrary"),
+            std::string::npos)
+      << one.output;
+  // Files whose every variable is tied say nothing (landmarks included).
+  for (const char* file : {"/intel.g2o", "/victoria_park.txt", "/sphere2500.g2o"}) {
+    const RunResult r = run(kData + file + " --quiet");
+    EXPECT_EQ(r.exitCode, 0) << file << ": " << r.output;
+    EXPECT_TRUE(r.output.empty()) << file << ": " << r.output;
+  }
+}
+
 // A stop before convergence is not an error (the estimate is the best reached) but is said:
 // Gauss-Newton cannot step on a graph whose two parts nothing ties together.
 TEST(LoopdSolve, AStopBeforeConvergenceIsAWarning) {

@@ -14,6 +14,7 @@
 #include "solvers/io/dataset_reader.h"
 #include "solvers/io/estimate_writer.h"
 #include "solvers/problem/pose_graph_problem.h"
+#include "solvers/problem/untied_variables.h"
 #include "tools/common/json_writer.h"
 #include "tools/common/process_stats.h"
 #include "tools/loopd-solve/covariance_writer.h"
@@ -29,6 +30,30 @@ double since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+// The file's name for a variable: "pose 12", "landmark 3".
+std::string vertexName(Key k) {
+  return (keyKind(k) == KeyKind::Landmark ? "landmark " : "pose ") + std::to_string(keyIndex(k));
+}
+
+// Not an error (the rest solves as it would alone), but such a part's placement is arbitrary.
+void warnIfUntied(const PoseGraphProblem& problem, const std::string& input) {
+  const std::vector<Key> untied =
+      untiedVariables(problem.graph, problem.initial, problem.firstPose);
+  if (untied.empty()) return;
+  std::string named = vertexName(untied[0]);
+  if (untied.size() > 1) named += ", " + vertexName(untied[1]);
+  if (untied.size() > 2) named += ", …";
+  const bool one = untied.size() == 1;
+  const std::string gauge = vertexName(problem.firstPose);
+  std::fprintf(stderr,
+               "loopd-solve: warning: %s: %zu of %d variables (%s) %s tied to %s by no chain of "
+               "edges and %s no prior: %s placement relative to %s is arbitrary (the solve leaves "
+               "%s near the file's), and %s marginals do not exist\n",
+               input.c_str(), untied.size(), problem.initial.size(), named.c_str(),
+               one ? "is" : "are", gauge.c_str(), one ? "has" : "have", one ? "its" : "their",
+               gauge.c_str(), one ? "it" : "them", one ? "its" : "their");
+}
+
 bool isIncremental(const std::string& solver) {
   for (const BackendInfo& b : availableBackends())
     if (b.name == solver) return b.incremental;
@@ -42,6 +67,7 @@ int run(const tools::SolveOptions& opt) {
   const std::vector<AmbiguousFactor> measurements = ambiguousFactors(problem);  // HYPOTHESES groups
   const double parseSeconds = since(tParse);
   const double initialChi2 = problem.graph.chi2(problem.initial);
+  warnIfUntied(problem, opt.input);
   if (!opt.quiet)
     std::fprintf(stderr, "%s: %d poses, %d landmarks, %d factors, initial chi2 %.6f (%.3f s)\n",
                  opt.input.c_str(), problem.poses, problem.landmarks, problem.graph.size(),
