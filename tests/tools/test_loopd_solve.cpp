@@ -212,14 +212,16 @@ TEST(LoopdSolve, PartsTiedToNothingAreNamedInAWarning) {
                                      "EDGE_SE2 0 1 1.1 0 0.1 1 0 0 1 0 1\n"
                                      "EDGE_SE2 2 3 0.9 0.2 0 1 0 0 1 0 1\n"
                                      "EDGE_SE2 3 4 1 0 0 1 0 0 1 0 1\n");
+  const std::string stats = testing::TempDir() + "/untied_stats.json";
   for (const char* mode : {"", " --incremental"}) {
-    const RunResult r = run(parts + " --solver isam2 --quiet" + mode);
+    const RunResult r = run(parts + " --solver isam2 --quiet --stats " + stats + mode);
     EXPECT_EQ(r.exitCode, 0) << r.output;
     EXPECT_NE(r.output.find("warning: " + parts +
                             ": 3 of 5 variables (pose 2, pose 3, …) are tied to pose 0 by no "
                             "chain of edges and have no prior"),
               std::string::npos)
         << mode << ": " << r.output;
+    EXPECT_EQ(loopd::tools::jsonNumber(slurp(stats), "untied_variables", NAN), 3) << mode;
   }
   // One pose alone, no edge at all.
   const std::string lone = tempFile("lone.g2o",
@@ -233,9 +235,10 @@ TEST(LoopdSolve, PartsTiedToNothingAreNamedInAWarning) {
       << one.output;
   // Files whose every variable is tied say nothing (landmarks included).
   for (const char* file : {"/intel.g2o", "/victoria_park.txt", "/sphere2500.g2o"}) {
-    const RunResult r = run(kData + file + " --quiet");
+    const RunResult r = run(kData + file + " --quiet --stats " + stats);
     EXPECT_EQ(r.exitCode, 0) << file << ": " << r.output;
     EXPECT_TRUE(r.output.empty()) << file << ": " << r.output;
+    EXPECT_EQ(loopd::tools::jsonNumber(slurp(stats), "untied_variables", NAN), 0) << file;
   }
 }
 

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <iostream>
 
@@ -36,10 +38,11 @@ std::string vertexName(Key k) {
 }
 
 // Not an error (the rest solves as it would alone), but such a part's placement is arbitrary.
-void warnIfUntied(const PoseGraphProblem& problem, const std::string& input) {
+// Returns how many variables it holds.
+std::size_t warnIfUntied(const PoseGraphProblem& problem, const std::string& input) {
   const std::vector<Key> untied =
       untiedVariables(problem.graph, problem.initial, problem.firstPose);
-  if (untied.empty()) return;
+  if (untied.empty()) return 0;
   std::string named = vertexName(untied[0]);
   if (untied.size() > 1) named += ", " + vertexName(untied[1]);
   if (untied.size() > 2) named += ", …";
@@ -52,6 +55,7 @@ void warnIfUntied(const PoseGraphProblem& problem, const std::string& input) {
                input.c_str(), untied.size(), problem.initial.size(), named.c_str(),
                one ? "is" : "are", gauge.c_str(), one ? "has" : "have", one ? "its" : "their",
                gauge.c_str(), one ? "it" : "them", one ? "its" : "their");
+  return untied.size();
 }
 
 bool isIncremental(const std::string& solver) {
@@ -67,7 +71,7 @@ int run(const tools::SolveOptions& opt) {
   const std::vector<AmbiguousFactor> measurements = ambiguousFactors(problem);  // HYPOTHESES groups
   const double parseSeconds = since(tParse);
   const double initialChi2 = problem.graph.chi2(problem.initial);
-  warnIfUntied(problem, opt.input);
+  const std::size_t untied = warnIfUntied(problem, opt.input);
   if (!opt.quiet)
     std::fprintf(stderr, "%s: %d poses, %d landmarks, %d factors, initial chi2 %.6f (%.3f s)\n",
                  opt.input.c_str(), problem.poses, problem.landmarks, problem.graph.size(),
@@ -150,7 +154,8 @@ int run(const tools::SolveOptions& opt) {
         .add("converged", summary.converged)
         .add("diverged", diverged)
         .add("stop_reason", summary.stopReason)
-        .add("incremental", opt.incremental);
+        .add("incremental", opt.incremental)
+        .add("untied_variables", static_cast<std::int64_t>(untied));
     if (opt.incremental) {
       stats.add("updates", online.all.count)
           .add("update_ms_mean", online.all.meanMs)
