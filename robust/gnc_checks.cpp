@@ -45,7 +45,7 @@ bool GncBackend::Run::tryDecisions(const std::vector<int>& factors, double weigh
 std::vector<int> GncBackend::Run::uncertainWhere(bool accepted) const {
   std::vector<int> out;
   for (int i = 0; i < n_; ++i)
-    if (cbar_[i] > 0.0 && (weights_[i] >= 0.5) == accepted) out.push_back(i);
+    if (cbar_[i] > 0.0 && this->accepted(i) == accepted) out.push_back(i);
   return out;
 }
 
@@ -74,13 +74,13 @@ bool GncBackend::Run::admitFitting(int cap) {
   const std::vector<int> rejectedOnes = uncertainWhere(false);
   std::vector<std::vector<int>> groups;
   for (int i : rejectedOnes) groups.push_back({i});
-  if (tls_)
+  if (decides_)
     for (auto& c : closureClusters(graph_, estimate_, rejectedOnes, gnc_.admitWindow))
       if (c.size() > 1 && static_cast<int>(c.size()) <= gnc_.maxCluster)
         groups.push_back(std::move(c));
   const std::vector<double> net = predictedNet(groups, GroupChange::Add);
   // The rise (net + the group's gates) within the noise (admitWithinNoise).
-  const bool noiseBound = tls_ && gnc_.admitWithinNoise && noiseAware_ && b_.scale_ > 0.0;
+  const bool noiseBound = decides_ && gnc_.admitWithinNoise && noiseAware_ && b_.scale_ > 0.0;
   auto withinNoise = [&](const std::vector<int>& group, double groupNet) {
     if (!noiseBound) return true;
     double rise = groupNet, bound = 0.0;
@@ -131,7 +131,7 @@ bool GncBackend::Run::dropBending(int cap) {
 void GncBackend::Run::runChecks(int cap) {
   for (int round = 0; round < gnc_.checkRounds; ++round) {
     const bool admitted = gnc_.recheckRejected && admitFitting(cap);
-    const bool dropped = tls_ && gnc_.dropClusters && dropBending(cap);
+    const bool dropped = decides_ && gnc_.dropClusters && dropBending(cap);
     if (!admitted && !dropped) break;
   }
 }
@@ -151,7 +151,7 @@ void GncBackend::Run::tryConsistentStart() {
     const double q = (cbar_[i] > 0.0 ? r2_[i] : graph_[i]->chi2(estimate_)) / half_[i];
     if (graph_[i]->role() == FactorRole::Odometry)
       qOdometry.push_back(q);
-    else if (cbar_[i] > 0.0 && weights_[i] >= 0.5)
+    else if (cbar_[i] > 0.0 && accepted(i))
       qClosures.push_back(q);
   }
   pcm.odometryScale = median(qOdometry, 1.0);
@@ -192,7 +192,7 @@ void GncBackend::Run::tryConsistentStart() {
   // then cut parking-garage's true tail).
   auto sameDecisions = [&] {
     for (int i = 0; i < n_; ++i)
-      if (cbar_[i] > 0.0 && (weights_[i] >= 0.5) != (kept.weights[i] >= 0.5)) return false;
+      if (cbar_[i] > 0.0 && accepted(i) != (kept.weights[i] >= acceptAt_)) return false;
     return true;
   };
   // First, both at the candidate's own gate if it is tighter (judgeAtOwnGate).

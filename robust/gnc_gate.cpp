@@ -30,7 +30,7 @@ TailGate tailGate(std::vector<double> q, double exponent, double medianFactor) {
 std::vector<double> GncBackend::Run::acceptedNormalized() const {
   std::vector<double> q;
   for (int i = 0; i < n_; ++i)
-    if (cbar_[i] > 0.0 && weights_[i] >= 0.5) q.push_back(r2_[i] / half_[i]);
+    if (cbar_[i] > 0.0 && accepted(i)) q.push_back(r2_[i] / half_[i]);
   return q;
 }
 
@@ -129,7 +129,7 @@ void GncBackend::Run::readmitAtTail(double cap) {
 // consistent-set start kept, the median 10x below the first one's), decide again against it
 // (re-admitting the tail as above) and re-run the checks.
 void GncBackend::Run::regateAtEnd() {
-  for (int round = 0; tls_ && gnc_.regateAtEnd && noiseAware_ && round < gnc_.maxGateRounds;
+  for (int round = 0; decides_ && gnc_.regateAtEnd && noiseAware_ && round < gnc_.maxGateRounds;
        ++round) {
     if (!shrinkGate()) break;
     gated_ = true;
@@ -155,7 +155,7 @@ void GncBackend::Run::regateAtEnd() {
 // re-admit them together, decide again against the gate, and keep that answer if its
 // truncated cost capped at max(gate, tail gate) is lower.
 void GncBackend::Run::admitTogetherAtTail() {
-  if (!tls_ || !noiseAware_ || gated_ || !gnc_.admitTogetherAtTail || !(b_.tailGate_ > 0.0) ||
+  if (!decides_ || !noiseAware_ || gated_ || !gnc_.admitTogetherAtTail || !(b_.tailGate_ > 0.0) ||
       !(b_.scale_ > 0.0))
     return;
   const std::vector<int> rejectedOnes = uncertainWhere(false);

@@ -25,6 +25,8 @@ GncBackend::Run::Run(GncBackend& backend, Values odometryStart, bool batchStartC
                          odometryStart_.size() > 0),
       batchStartCandidate_(batchStartCandidate),
       refineCap_(backend.gnc_.refineIterations),
+      decides_(tls_ || backend.gnc_.gmDecidesAtThreshold),
+      acceptAt_(tls_ || !decides_ ? 0.5 : 0.25),
       fullIterations_(backend.optimizer().options().maxIterations),
       defaultLambda_(backend.optimizer().options().initialLambda),
       r2_(n_, 0.0),
@@ -172,7 +174,7 @@ void GncBackend::Run::gncPass(bool first, bool fromOdometry, const Values* from)
 
 // A kept answer's capped solves, finished: refined against the gate if it acts.
 void GncBackend::Run::solveToConvergence() {
-  if (gated_)
+  if (gated_ || (decides_ && !tls_))
     refine(0);
   else
     solveWeighted(0);
@@ -219,7 +221,7 @@ void GncBackend::Run::restore(const Candidate& c) {
 
 int GncBackend::Run::rejectedCount() const {
   int count = 0;
-  for (int i = 0; i < n_; ++i) count += cbar_[i] > 0.0 && weights_[i] < 0.5;
+  for (int i = 0; i < n_; ++i) count += cbar_[i] > 0.0 && !accepted(i);
   return count;
 }
 

@@ -45,6 +45,8 @@ class GncBackend::Run {
   double tlsCost(const std::vector<double>& caps) const;
   Candidate snapshot() const;
   void restore(const Candidate& c);
+  /// Whether the current weights take factor i in (weight ≥ acceptAt_).
+  bool accepted(int i) const { return weights_[i] >= acceptAt_; }
   int rejectedCount() const;
   bool belowDefaults(const std::vector<double>& thresholds) const;
   void consider(const std::string& name);
@@ -82,6 +84,8 @@ class GncBackend::Run {
   const Values odometryStart_;
   const bool tls_, noiseAware_, odometryCandidate_, batchStartCandidate_;
   const int refineCap_;
+  const bool decides_;     // 0/1 decisions at the end: TLS, or GM with gmDecidesAtThreshold
+  const double acceptAt_;  // 0.5; GM with GncOptions::gmDecidesAtThreshold: 0.25
   // The optimizer's own limits, restored after each capped solve.
   const int fullIterations_;
   const double defaultLambda_;
